@@ -1,0 +1,54 @@
+# visnav: `make run` (set up + main job) and `make test` (set up + test suite).
+# Everything is installed into .venv; nothing is downloaded at run time.
+
+PYTHON ?= python3
+VENV ?= .venv
+# PyPI's default torch is a multi-GB CUDA build; this pin picks the CPU wheel on our machines.
+TORCH_SPEC ?= torch==2.13.0
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.visnav-installed
+SOURCES := setup.cfg pyproject.toml $(shell find src worlds config ros -type f -not -name '*.pyc' 2>/dev/null)
+
+# ROS 2 environment: the venv is the ament prefix; keep DDS traffic on this machine.
+export AMENT_PREFIX_PATH := $(abspath $(VENV))
+export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
+export MUJOCO_GL ?= egl
+
+.PHONY: run test test-slow setup system-deps lint bench demo clean
+
+run: setup
+	$(VENV)/bin/nav-sim-demo
+
+test: setup
+	$(PY) -m pytest -q
+
+test-slow: setup
+	$(PY) -m pytest -q -m slow
+
+bench: setup
+	$(PY) benchmarks/bench_sim.py
+
+lint: setup
+	$(VENV)/bin/ruff check src test benchmarks
+
+setup: system-deps $(STAMP)
+
+# MuJoCo's offscreen rendering needs EGL and Mesa (Debian: libegl1 libgl1-mesa-dri).
+system-deps:
+	@if ! ldconfig -p | grep -q 'libEGL.so.1'; then \
+	  if [ "$$(id -u)" = 0 ]; then \
+	    apt-get update -qq && apt-get install -y -qq libegl1 libgl1-mesa-dri; \
+	  else \
+	    echo 'missing EGL: run  sudo apt-get install libegl1 libgl1-mesa-dri'; exit 1; \
+	  fi; \
+	fi
+
+$(STAMP): $(SOURCES)
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q '$(TORCH_SPEC)'
+	$(PY) -m pip install -q '.[test]'
+	touch $@
+
+clean:
+	rm -rf $(VENV) build src/*.egg-info

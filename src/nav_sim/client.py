@@ -1,0 +1,261 @@
+"""A lockstep client of the ``nav_sim`` node: publish ``cmd_vel``, receive the period's messages.
+
+Used by the Gymnasium env, the evaluation tools, the demo, the tests and the benchmark.  It runs
+its own rclpy context and spins its ``SingleThreadedExecutor`` in the calling thread while it
+waits (no thread hand-over on the lockstep hot path), so it can be created and closed many times
+in one process.  Every wait is bounded: if the sim does not answer, or disappears mid-episode, a
+:class:`SimUnavailableError` says what to start.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, Twist
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from sensor_msgs.msg import Image
+from std_srvs.srv import Trigger
+
+from nav_sim import qos, ros_msgs
+from nav_sim.errors import FrameSyncError, ScenarioError, SimUnavailableError
+
+POLL_S = 0.25
+
+
+@dataclass(frozen=True)
+class Frame:
+    """The messages of one control period, matched by stamp."""
+
+    stamp_ns: int
+    image: Image
+    event: dict[str, Any]
+    pose: tuple[float, float, float]
+    twist: tuple[float, float]
+
+    @property
+    def period(self) -> int:
+        return int(self.event['period'])
+
+
+class SimClient:
+    """Drive a running nav_sim node in lockstep."""
+
+    def __init__(self, namespace: str = '', timeout: float = 10.0,
+                 node_name: str = 'visnav_client') -> None:
+        self.namespace = namespace.rstrip('/')
+        self.timeout = timeout
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context)
+        # no parameter services or rosout: fewer entities in every wait of the hot path
+        self.node = rclpy.create_node(node_name, namespace=self.namespace or '/',
+                                      context=self.context, start_parameter_services=False,
+                                      enable_rosout=False)
+        self._partial: dict[int, dict[str, Any]] = {}
+        self._latest: Frame | None = None
+        self.goal: tuple[float, float] | None = None
+        n = self.node
+        self._subs = [
+            n.create_subscription(Image, 'camera/image_raw', self._part('image'),
+                                  qos.OBSERVATION),
+            n.create_subscription(DiagnosticArray, 'episode_event', self._part('event'),
+                                  qos.OBSERVATION),
+        ]
+        # The lockstep hot path waits on these two subscriptions directly, as
+        # rclpy.wait_for_message does: the executor's per-wait bookkeeping costs more than the
+        # sim's whole control period.  Services and the latched goal go through the executor.
+        self._wait_set = _rclpy.WaitSet(len(self._subs), 0, 0, 0, 0, 0, self.context.handle)
+        n.create_subscription(PoseStamped, 'goal_pose', self._on_goal, qos.LATCHED)
+        self.pub_cmd = n.create_publisher(Twist, 'cmd_vel', qos.CONTROL)
+        self.cli_reset = n.create_client(Trigger, 'reset')
+        self.cli_stop = n.create_client(Trigger, 'stop')
+        self.cli_params = n.create_client(SetParameters, 'sim_node/set_parameters')
+        self._executor = SingleThreadedExecutor(context=self.context)
+        self._executor.add_node(n)
+
+    # --- plumbing -------------------------------------------------------------------------
+    def _part(self, kind: str):  # noqa: ANN202 - subscription callback factory
+        def callback(msg: Any) -> None:
+            stamp = ros_msgs.stamp_to_ns(msg.header.stamp)
+            parts = self._partial.setdefault(stamp, {})
+            parts[kind] = msg
+            if len(parts) == 2:
+                del self._partial[stamp]
+                for old in [s for s in self._partial if s < stamp]:
+                    del self._partial[old]
+                self._latest = _frame(stamp, parts)
+        return callback
+
+    def _on_goal(self, msg: PoseStamped) -> None:
+        self.goal = (msg.pose.position.x, msg.pose.position.y)
+
+    @property
+    def where(self) -> str:
+        return f"namespace '{self.namespace or '/'}'"
+
+    def sim_present(self) -> bool:
+        return self.node.count_publishers(self.node.resolve_topic_name('camera/image_raw')) > 0
+
+    def spin_until(self, done: Callable[[], bool], limit: float) -> bool:
+        """Process callbacks until ``done()`` or ``limit`` seconds pass; False on time-out."""
+        deadline = time.monotonic() + limit
+        next_check = time.monotonic() + POLL_S
+        while not done():
+            now = time.monotonic()
+            if now >= deadline:
+                return False
+            self._executor.spin_once(timeout_sec=min(deadline - now, POLL_S))
+            if time.monotonic() >= next_check:
+                if not self.sim_present():
+                    raise SimUnavailableError(
+                        f'nav_sim in {self.where} is gone (no camera publisher); restart it '
+                        'with `ros2 run nav_sim sim_node`')
+                next_check = time.monotonic() + POLL_S
+        return True
+
+    def _take_observations(self, timeout: float) -> None:
+        """Wait up to ``timeout`` s on the observation subscriptions and take what arrived."""
+        ws = self._wait_set
+        ws.clear_entities()
+        for sub in self._subs:
+            ws.add_subscription(sub.handle)
+        ws.wait(int(timeout * 1e9))
+        ready = ws.get_ready_entities('subscription')
+        for sub in self._subs:
+            if sub.handle.pointer in ready:
+                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                if taken is not None:
+                    sub.callback(taken[0])
+
+    def _wait_frame(self, predicate: Callable[[Frame], bool], what: str) -> Frame:
+        def arrived() -> bool:
+            return self._latest is not None and predicate(self._latest)
+
+        deadline = time.monotonic() + self.timeout
+        while not arrived():
+            left = deadline - time.monotonic()
+            if left <= 0:
+                break
+            self._take_observations(min(left, POLL_S))
+            if not arrived() and not self.sim_present():
+                raise SimUnavailableError(
+                    f'nav_sim in {self.where} is gone (no camera publisher) while waiting for '
+                    f'{what}; restart it with `ros2 run nav_sim sim_node`')
+        if not arrived():
+            raise SimUnavailableError(
+                f'no {what} from nav_sim in {self.where} within {self.timeout} s; is '
+                '`ros2 run nav_sim sim_node` running there (in lockstep mode)?')
+        assert self._latest is not None
+        return self._latest
+
+    def _call(self, client: Any, request: Any, what: str) -> Any:
+        if not client.wait_for_service(timeout_sec=self.timeout):
+            raise SimUnavailableError(
+                f'service {client.srv_name} of nav_sim in {self.where} not available within '
+                f'{self.timeout} s; start the sim with `ros2 run nav_sim sim_node`')
+        future = client.call_async(request)
+        if not self.spin_until(future.done, self.timeout):
+            client.remove_pending_request(future)
+            raise SimUnavailableError(f'{what} of nav_sim in {self.where} timed out after '
+                                      f'{self.timeout} s')
+        return future.result()
+
+    # --- public API -----------------------------------------------------------------------
+    def wait_for_sim(self, timeout: float | None = None) -> None:
+        """Block until the sim's camera topic and reset service exist, or raise with advice."""
+        limit = timeout or self.timeout
+        deadline = time.monotonic() + limit
+        while not (self.sim_present() and self.cli_reset.service_is_ready()):
+            if time.monotonic() > deadline:
+                raise SimUnavailableError(
+                    f'no nav_sim node found in {self.where} after {limit} s; start one with '
+                    '`ros2 run nav_sim sim_node` (add `--ros-args -r __ns:=/NS` for a namespace)')
+            self._executor.spin_once(timeout_sec=0.05)
+
+    def set_parameters(self, **values: Any) -> None:
+        """Set sim_node parameters (e.g. seed, split); raises ScenarioError if refused."""
+        request = SetParameters.Request()
+        request.parameters = [_parameter_msg(k, v) for k, v in values.items()]
+        response = self._call(self.cli_params, request, 'set_parameters')
+        for (key, value), result in zip(values.items(), response.results, strict=False):
+            if not result.successful:
+                raise ScenarioError(f'sim_node refused {key}={value!r}: {result.reason}')
+
+    def reset(self, seed: int | None = None, split: str | None = None) -> tuple[Frame, dict]:
+        """Start an episode; returns its first frame and the scenario the sim loaded."""
+        values = {k: v for k, v in (('seed', seed), ('split', split)) if v is not None}
+        if values:
+            self.set_parameters(**values)
+        response = self._call(self.cli_reset, Trigger.Request(), 'reset')
+        if not response.success:
+            raise ScenarioError(response.message)
+        scenario = json.loads(response.message)
+        stamp = int(scenario['stamp_ns'])
+        frame = self._wait_frame(lambda f: f.stamp_ns >= stamp, 'first observation after reset')
+        if frame.stamp_ns != stamp:
+            raise FrameSyncError(f'expected the reset frame {stamp} ns, got {frame.stamp_ns} ns')
+        return frame, scenario
+
+    def step(self, linear: float, angular: float, after: Frame) -> Frame:
+        """Publish one cmd_vel and return the frame of the control period it caused."""
+        msg = Twist()
+        msg.linear.x, msg.angular.z = float(linear), float(angular)
+        expected = after.period + 1
+        self.pub_cmd.publish(msg)
+        frame = self._wait_frame(lambda f: f.period >= expected, 'observation after cmd_vel')
+        if frame.period != expected:
+            raise FrameSyncError(
+                f'expected control period {expected}, got {frame.period}: another client may '
+                f'be driving the sim in {self.where}, or frames were dropped')
+        return frame
+
+    def stop(self) -> list[float]:
+        """Stop the motors; returns the wheel speeds the sim reports after stopping."""
+        response = self._call(self.cli_stop, Trigger.Request(), 'stop')
+        return [float(v) for v in json.loads(response.message)['wheels']]
+
+    def close(self) -> None:
+        """Destroy the node, the executor and the context."""
+        if self.context.ok():
+            self._executor.shutdown(timeout_sec=1.0)
+            self.node.destroy_node()
+            self.context.try_shutdown()
+
+    def __enter__(self) -> SimClient:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _frame(stamp: int, parts: dict[str, Any]) -> Frame:
+    event = ros_msgs.parse_event(parts['event']) or {'event': 'none', 'period': -1}
+    pose = (event.get('x', math.nan), event.get('y', math.nan), event.get('yaw', math.nan))
+    twist = (event.get('linear', math.nan), event.get('angular', math.nan))
+    return Frame(stamp, parts['image'], event, pose, twist)
+
+
+def _parameter_msg(name: str, value: Any) -> ParameterMsg:
+    pv = ParameterValue()
+    if isinstance(value, bool):
+        pv.type, pv.bool_value = ParameterType.PARAMETER_BOOL, value
+    elif isinstance(value, (int, np.integer)):
+        pv.type, pv.integer_value = ParameterType.PARAMETER_INTEGER, int(value)
+    elif isinstance(value, float):
+        if not math.isfinite(value):
+            raise ScenarioError(f'{name} must be finite, got {value}')
+        pv.type, pv.double_value = ParameterType.PARAMETER_DOUBLE, value
+    else:
+        pv.type, pv.string_value = ParameterType.PARAMETER_STRING, str(value)
+    return ParameterMsg(name=name, value=pv)

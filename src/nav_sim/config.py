@@ -1,0 +1,140 @@
+"""Simulation configuration shared by the core, the ROS parameters and the command line.
+
+Every field carries a one-line description in its metadata; the ROS node declares one parameter per
+field with that description, and ``config/sim.yaml`` holds the defaults a user may change.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from dataclasses import dataclass, field
+from typing import Any
+
+from nav_sim.errors import ConfigError, ScenarioError
+
+SPLITS = ('train', 'heldout')
+SPLIT_ALIASES = {'train': 'train', 'training': 'train', 'heldout': 'heldout',
+                 'held-out': 'heldout', 'held_out': 'heldout', 'test': 'heldout'}
+
+
+def _f(default: Any, help: str) -> Any:
+    return field(default=default, metadata={'help': help})
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """Parameters of the world, the robot, the camera and the task (no ROS)."""
+
+    world: str = _f('arena.xml', 'MJCF file: a path, or a name under share/nav_sim/worlds')
+    sim_dt: float = _f(0.032, 'physics timestep in seconds (Webots basicTimeStep default: 32 ms)')
+    action_repeat: int = _f(6, 'physics steps per control period (ctrl_dt = sim_dt * repeat)')
+    settle_steps: int = _f(2, 'physics steps with motors stopped after a reset')
+    wheel_radius: float = _f(0.0205, 'wheel radius in metres (e-puck: 2.05 cm)')
+    axle_length: float = _f(0.052, 'distance between the wheels in metres (e-puck: 5.2 cm)')
+    max_wheel_speed: float = _f(6.28, 'wheel speed limit in rad/s (e-puck: 6.28 rad/s)')
+    camera_width: int = _f(128, 'native camera image width in pixels')
+    camera_height: int = _f(96, 'native camera image height in pixels')
+    camera_hfov_deg: float = _f(48.0, 'horizontal field of view in degrees (e-puck: 0.84 rad)')
+    goal_radius: float = _f(0.1, 'success when the robot centre is this close to the goal (m)')
+    goal_marker_radius: float = _f(0.05, 'radius of the green goal cylinder in metres')
+    goal_marker_height: float = _f(0.1, 'height of the green goal cylinder in metres')
+    min_start_goal_distance: float = _f(0.6, 'minimum straight-line start-goal distance (m)')
+    num_obstacles: int = _f(3, 'obstacles per layout (at most the slots in the world)')
+    train_layouts: int = _f(20, 'number of layouts in the training bank')
+    heldout_layouts: int = _f(10, 'number of layouts in the held-out bank')
+    train_bank_seed: int = _f(1_000, 'seed that generates the training layout bank')
+    heldout_bank_seed: int = _f(2_000, 'seed that generates the held-out layout bank')
+
+    @property
+    def ctrl_dt(self) -> float:
+        """Duration of one control period in seconds."""
+        return self.sim_dt * self.action_repeat
+
+    @property
+    def camera_fovy_deg(self) -> float:
+        """Vertical field of view that gives ``camera_hfov_deg`` at the camera aspect ratio."""
+        half = math.radians(self.camera_hfov_deg) / 2.0
+        return math.degrees(2.0 * math.atan(math.tan(half) * self.camera_height
+                                            / self.camera_width))
+
+    def __post_init__(self) -> None:
+        positive = ('sim_dt', 'wheel_radius', 'axle_length', 'max_wheel_speed', 'goal_radius',
+                    'goal_marker_radius', 'goal_marker_height', 'min_start_goal_distance')
+        for name in positive:
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ConfigError(f'{name} must be a finite number > 0, got {value!r}')
+        for name in ('action_repeat', 'camera_width', 'camera_height', 'train_layouts',
+                     'heldout_layouts'):
+            if int(getattr(self, name)) < 1:
+                raise ConfigError(f'{name} must be >= 1, got {getattr(self, name)!r}')
+        if self.settle_steps < 0 or self.num_obstacles < 0:
+            raise ConfigError('settle_steps and num_obstacles must be >= 0')
+        if not 1.0 <= self.camera_hfov_deg <= 170.0:
+            raise ConfigError(f'camera_hfov_deg must be in [1, 170], got {self.camera_hfov_deg}')
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any]) -> SimConfig:
+        """Build from a mapping, rejecting unknown keys with the list of known ones."""
+        known = {f.name: f for f in dataclasses.fields(cls)}
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise ConfigError(f'unknown simulation parameter(s) {unknown}; known: {sorted(known)}')
+        converted = {}
+        for key, value in values.items():
+            kind = type(known[key].default)
+            try:
+                converted[key] = kind(value)
+            except (TypeError, ValueError) as exc:
+                raise ConfigError(f'{key}: cannot convert {value!r} to {kind.__name__}') from exc
+        return cls(**converted)
+
+
+def normalise_split(split: str) -> str:
+    """Return the canonical split name ('train' or 'heldout') or raise ScenarioError."""
+    key = str(split).strip().lower()
+    if key not in SPLIT_ALIASES:
+        raise ScenarioError(f'unknown split {split!r}: use one of {list(SPLITS)}')
+    return SPLIT_ALIASES[key]
+
+
+def validate_seed(seed: Any) -> int:
+    """Return the seed as a non-negative int or raise ScenarioError."""
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+        raise ScenarioError(f'seed must be a non-negative integer, got {seed!r}')
+    if int(seed) < 0 or int(seed) >= 2**63:
+        raise ScenarioError(f'seed must be in [0, 2**63), got {seed!r}')
+    return int(seed)
+
+
+MODES = ('lockstep', 'realtime')
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """Settings of the ``sim_node`` ROS adapter (the simulation itself is in SimConfig)."""
+
+    mode: str = _f('lockstep', "'lockstep': one cmd_vel = one control period; 'realtime': "
+                   'free-running at wall-clock rate with the latest cmd_vel')
+    seed: int = _f(0, 'scenario seed used by the next reset (non-negative integer)')
+    split: str = _f('train', "scenario bank used by the next reset: 'train' or 'heldout'")
+    reset_on_start: bool = _f(True, 'load the scenario of (seed, split) when the node starts')
+    realtime_rate: float = _f(1.0, 'realtime mode: simulated seconds per wall-clock second')
+    cmd_vel_timeout: float = _f(0.5, 'realtime mode: stop the motors after this long (wall '
+                                'seconds) without a cmd_vel')
+    publish_clock: bool = _f(True, 'publish sim time on /clock')
+    odom_frame: str = _f('odom', 'frame of the odometry and goal pose')
+    base_frame: str = _f('base_link', 'frame of the robot body')
+    camera_frame: str = _f('camera_optical_frame', 'optical frame of the camera images')
+
+    def __post_init__(self) -> None:
+        if self.mode not in MODES:
+            raise ConfigError(f'mode must be one of {list(MODES)}, got {self.mode!r}')
+        if not (math.isfinite(self.realtime_rate) and self.realtime_rate > 0):
+            raise ConfigError(f'realtime_rate must be > 0, got {self.realtime_rate!r}')
+        if not (math.isfinite(self.cmd_vel_timeout) and self.cmd_vel_timeout > 0):
+            raise ConfigError(f'cmd_vel_timeout must be > 0, got {self.cmd_vel_timeout!r}')
+        # seed and split are checked when they are set and again by each reset, which reports
+        # a bad value as success=false instead of refusing to start the node.

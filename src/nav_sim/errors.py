@@ -1,0 +1,31 @@
+"""Specific errors of nav_sim, each saying what to do next."""
+
+from __future__ import annotations
+
+
+class NavSimError(Exception):
+    """Base class of every nav_sim error."""
+
+
+class WorldNotFoundError(NavSimError, FileNotFoundError):
+    """The MJCF world could not be found in any searched location."""
+
+
+class ScenarioError(NavSimError, ValueError):
+    """A scenario request (seed, split) or a scenario bank is invalid."""
+
+
+class ConfigError(NavSimError, ValueError):
+    """A simulation parameter has an invalid value."""
+
+
+class EpisodeNotStartedError(NavSimError, RuntimeError):
+    """The simulation was stepped before the first reset."""
+
+
+class SimUnavailableError(NavSimError, TimeoutError):
+    """No nav_sim node answered in time, or it disappeared mid-episode."""
+
+
+class FrameSyncError(NavSimError, RuntimeError):
+    """An observation arrived out of order (stale or dropped control periods)."""

@@ -1,0 +1,202 @@
+"""The simulation core (no ROS): reset a scenario, drive the wheels for one control period, render.
+
+Time scales: one *physics step* is ``sim_dt`` seconds; one *control period* is ``action_repeat``
+physics steps.  Collision and goal are checked after every physics step; on either event the
+period stops early and the motors are stopped.  The robot base is kinematic: the e-puck's
+stepper motors do not slip, so each physics step integrates the exact differential-drive motion of
+the wheel speeds (an arc) and MuJoCo then computes contacts against walls and obstacles for the
+new pose.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from nav_sim.config import SimConfig
+from nav_sim.errors import EpisodeNotStartedError
+from nav_sim.scenarios import Scenario, build_banks, sample_scenario
+from nav_sim.world import World
+
+EVENT_NONE, EVENT_GOAL, EVENT_COLLISION = 'none', 'goal', 'collision'
+EVENTS = (EVENT_NONE, EVENT_GOAL, EVENT_COLLISION)
+
+
+@dataclass(frozen=True)
+class WheelCommand:
+    """Wheel angular speeds in rad/s (positive drives forward) after saturation."""
+
+    left: float
+    right: float
+    saturated: bool = False
+
+
+def twist_to_wheels(linear: float, angular: float, config: SimConfig) -> WheelCommand:
+    """Differential-drive inverse kinematics, saturating at the wheel limit.
+
+    Both wheels are scaled by the same factor so the commanded curvature is kept.  Non-finite
+    inputs raise ValueError (callers decide whether to reject or stop).
+    """
+    if not (math.isfinite(linear) and math.isfinite(angular)):
+        raise ValueError(f'non-finite velocity command (linear={linear}, angular={angular})')
+    half_axle = config.axle_length / 2.0
+    left = (linear - angular * half_axle) / config.wheel_radius
+    right = (linear + angular * half_axle) / config.wheel_radius
+    peak = max(abs(left), abs(right))
+    if peak > config.max_wheel_speed:
+        scale = config.max_wheel_speed / peak
+        return WheelCommand(left * scale, right * scale, True)
+    return WheelCommand(left, right, False)
+
+
+def wheels_to_twist(left: float, right: float, config: SimConfig) -> tuple[float, float]:
+    """Differential-drive forward kinematics: (linear m/s, angular rad/s)."""
+    linear = config.wheel_radius * (left + right) / 2.0
+    angular = config.wheel_radius * (right - left) / config.axle_length
+    return linear, angular
+
+
+@dataclass(frozen=True)
+class StepResult:
+    """Outcome of one control period."""
+
+    event: str
+    physics_steps: int
+    pose: tuple[float, float, float]
+    distance: float
+    done: bool
+    episode_step: int
+    period: int
+
+
+class NavSim:
+    """Scenario reset, wheel control with action repeat, goal/collision checks and rendering."""
+
+    def __init__(self, config: SimConfig | None = None) -> None:
+        self.config = config or SimConfig()
+        self.world = World(self.config)
+        self.banks = build_banks(self.config, self.world.geometry)
+        self.scenario: Scenario | None = None
+        self.wheels = WheelCommand(0.0, 0.0)
+        self.total_physics_steps = 0  # never reset: sim time is monotonic across episodes
+        self.period = 0               # control periods since start, across episodes
+        self.episode = 0
+        self.episode_step = 0
+        self.done = False
+        self.last_event = EVENT_NONE
+        self.path_length = 0.0
+
+    # --- state ----------------------------------------------------------------------------
+    @property
+    def sim_time_ns(self) -> int:
+        return self.total_physics_steps * round(self.config.sim_dt * 1e9)
+
+    @property
+    def pose(self) -> tuple[float, float, float]:
+        return self.world.robot_pose()
+
+    @property
+    def goal(self) -> tuple[float, float]:
+        return self.world.goal_position()
+
+    @property
+    def distance(self) -> float:
+        x, y, _ = self.pose
+        gx, gy = self.goal
+        return math.hypot(gx - x, gy - y)
+
+    @property
+    def twist(self) -> tuple[float, float]:
+        """Current body-frame (linear, angular) velocity from the wheel speeds."""
+        return wheels_to_twist(self.wheels.left, self.wheels.right, self.config)
+
+    # --- episode control ------------------------------------------------------------------
+    def reset(self, seed: int, split: str = 'train') -> Scenario:
+        """Stop the motors, load the scenario of (seed, split) and settle; raises ScenarioError."""
+        scenario = sample_scenario(seed, split, self.banks, self.world.geometry, self.config)
+        self.stop()
+        self.world.set_layout(scenario.layout)
+        self.world.set_goal(*scenario.goal)
+        self.world.set_robot_pose(*scenario.start)
+        mujoco.mj_forward(self.world.model, self.world.data)
+        for _ in range(self.config.settle_steps):
+            self._physics_step()
+        self.scenario = scenario
+        self.episode += 1
+        self.episode_step = 0
+        self.done = False
+        self.last_event = EVENT_NONE
+        self.path_length = 0.0
+        return scenario
+
+    def stop(self) -> None:
+        """Stop the motors (the robot stays where it is)."""
+        self.wheels = WheelCommand(0.0, 0.0)
+        self.world.data.qvel[self.world.qvel_adr] = 0.0
+
+    def step(self, command: WheelCommand) -> StepResult:
+        """Drive with ``command`` for one control period, stopping early on goal or collision."""
+        if self.scenario is None:
+            raise EpisodeNotStartedError('call reset(seed, split) before step()')
+        self.period += 1
+        steps = 0
+        if self.done:  # the episode has ended: the motors stay stopped, time still passes
+            for _ in range(self.config.action_repeat):
+                self._physics_step()
+            return self._result(self.last_event, 0)
+        self.episode_step += 1
+        self.wheels = command
+        event = EVENT_NONE
+        for _ in range(self.config.action_repeat):
+            self._physics_step()
+            steps += 1
+            event = self._check_event()
+            if event != EVENT_NONE:
+                self.stop()
+                self.done = True
+                break
+        self.last_event = event
+        return self._result(event, steps)
+
+    def _result(self, event: str, steps: int) -> StepResult:
+        return StepResult(event, steps, self.pose, self.distance, self.done, self.episode_step,
+                          self.period)
+
+    def _check_event(self) -> str:
+        if self.distance <= self.config.goal_radius:
+            return EVENT_GOAL  # success takes precedence over a contact in the same step
+        if self.world.robot_in_collision():
+            return EVENT_COLLISION
+        return EVENT_NONE
+
+    def _physics_step(self) -> None:
+        """Advance sim_dt: exact arc motion of the wheel speeds, then kinematics and contacts."""
+        dt = self.config.sim_dt
+        linear, angular = self.twist
+        x, y, yaw = (float(v) for v in self.world.data.qpos[self.world.qpos_adr])
+        if abs(angular) < 1e-9:
+            nx, ny = x + linear * dt * math.cos(yaw), y + linear * dt * math.sin(yaw)
+        else:
+            radius = linear / angular
+            nx = x + radius * (math.sin(yaw + angular * dt) - math.sin(yaw))
+            ny = y - radius * (math.cos(yaw + angular * dt) - math.cos(yaw))
+        nyaw = yaw + angular * dt
+        data = self.world.data
+        data.qpos[self.world.qpos_adr] = (nx, ny, nyaw)
+        data.qvel[self.world.qvel_adr] = (linear * math.cos(nyaw), linear * math.sin(nyaw),
+                                          angular)
+        self.path_length += math.hypot(nx - x, ny - y)
+        self.total_physics_steps += 1
+        data.time = self.total_physics_steps * self.config.sim_dt
+        mujoco.mj_fwdPosition(self.world.model, data)
+
+    # --- sensing --------------------------------------------------------------------------
+    def render(self) -> np.ndarray:
+        """The camera image (height, width, 3) uint8 RGB of the current state."""
+        return self.world.render_camera()
+
+    def close(self) -> None:
+        self.world.close()

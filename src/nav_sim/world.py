@@ -1,0 +1,141 @@
+"""The MuJoCo world: load the MJCF, look up named ids, place things and render the camera.
+
+No task logic here (see ``scenarios.py`` and ``sim.py``).  Rendering is offscreen;
+``MUJOCO_GL`` defaults to ``egl`` (set in ``nav_sim/__init__``; Debian packages ``libegl1`` and
+``libgl1-mesa-dri``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+
+from nav_sim.config import SimConfig
+from nav_sim.paths import find_world
+from nav_sim.scenarios import ArenaGeometry, Layout, ObstacleShape
+
+CAMERA = 'front_camera'
+PARKED = np.array([10.0, 10.0, -1.0])  # where unused obstacle slots wait, out of sight
+
+
+class World:
+    """An MJCF model with its data, named ids and a fast offscreen camera renderer."""
+
+    def __init__(self, config: SimConfig) -> None:
+        self.config = config
+        self.path = find_world(config.world)
+        self.model = mujoco.MjModel.from_xml_path(str(self.path))
+        self.data = mujoco.MjData(self.model)
+        self._configure_model()
+        self._ids()
+        self.geometry = self._arena_geometry()
+        self._renderer: mujoco.Renderer | None = None
+
+    def _configure_model(self) -> None:
+        m, cfg = self.model, self.config
+        m.opt.timestep = cfg.sim_dt
+        m.vis.quality.offsamples = 0
+        m.vis.global_.offwidth = max(cfg.camera_width, 1)
+        m.vis.global_.offheight = max(cfg.camera_height, 1)
+        cam = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA)
+        m.cam_fovy[cam] = cfg.camera_fovy_deg
+        goal = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, 'goal')
+        m.geom_size[goal, :2] = (cfg.goal_marker_radius, cfg.goal_marker_height / 2.0)
+        m.geom_rbound[goal] = math.hypot(cfg.goal_marker_radius, cfg.goal_marker_height / 2.0)
+
+    def _ids(self) -> None:
+        m = self.model
+        name2id = mujoco.mj_name2id
+        self.camera_id = name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA)
+        self.robot_geom = name2id(m, mujoco.mjtObj.mjOBJ_GEOM, 'robot_body')
+        self.robot_body = name2id(m, mujoco.mjtObj.mjOBJ_BODY, 'robot')
+        self.qpos_adr = [m.jnt_qposadr[name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)]
+                         for j in ('base_x', 'base_y', 'base_yaw')]
+        self.qvel_adr = [m.jnt_dofadr[name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)]
+                         for j in ('base_x', 'base_y', 'base_yaw')]
+        self.goal_mocap = m.body_mocapid[name2id(m, mujoco.mjtObj.mjOBJ_BODY, 'goal')]
+        self.obstacle_geoms: list[int] = []
+        self.obstacle_mocaps: list[int] = []
+        index = 0
+        while (body := name2id(m, mujoco.mjtObj.mjOBJ_BODY, f'obstacle_{index}')) >= 0:
+            self.obstacle_mocaps.append(int(m.body_mocapid[body]))
+            self.obstacle_geoms.append(name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f'obstacle_{index}'))
+            index += 1
+
+    def _arena_geometry(self) -> ArenaGeometry:
+        m = self.model
+        shapes = []
+        for geom in self.obstacle_geoms:
+            size = m.geom_size[geom]
+            if m.geom_type[geom] == mujoco.mjtGeom.mjGEOM_CYLINDER:
+                shapes.append(ObstacleShape(m.geom(geom).name, 'cylinder', float(size[0]),
+                                            float(size[0])))
+            else:
+                shapes.append(ObstacleShape(m.geom(geom).name, 'box', float(size[0]),
+                                            float(size[1])))
+        wall = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, 'wall_east')
+        half_size = float(m.geom_pos[wall][0] - m.geom_size[wall][0])
+        robot_radius = float(m.geom_size[self.robot_geom][0])
+        return ArenaGeometry(half_size, robot_radius, tuple(shapes))
+
+    # --- placing things -------------------------------------------------------------------
+    def set_layout(self, layout: Layout) -> None:
+        """Move the layout's obstacle slots into the arena and park the others."""
+        placed = {p.slot: p for p in layout.placements}
+        for slot, mocap in enumerate(self.obstacle_mocaps):
+            height = self.model.geom_size[self.obstacle_geoms[slot]][-1]
+            if slot in placed:
+                p = placed[slot]
+                self.data.mocap_pos[mocap] = (p.x, p.y, height)
+                self.data.mocap_quat[mocap] = (math.cos(p.yaw / 2), 0.0, 0.0,
+                                               math.sin(p.yaw / 2))
+            else:
+                self.data.mocap_pos[mocap] = PARKED + (slot, 0.0, 0.0)
+                self.data.mocap_quat[mocap] = (1.0, 0.0, 0.0, 0.0)
+
+    def set_goal(self, x: float, y: float) -> None:
+        self.data.mocap_pos[self.goal_mocap] = (x, y, self.config.goal_marker_height / 2.0)
+
+    def set_robot_pose(self, x: float, y: float, yaw: float) -> None:
+        self.data.qpos[self.qpos_adr] = (x, y, yaw)
+        self.data.qvel[self.qvel_adr] = 0.0
+
+    def robot_pose(self) -> tuple[float, float, float]:
+        x, y, yaw = (float(v) for v in self.data.qpos[self.qpos_adr])
+        return x, y, math.remainder(yaw, 2.0 * math.pi)
+
+    def goal_position(self) -> tuple[float, float]:
+        pos = self.data.mocap_pos[self.goal_mocap]
+        return float(pos[0]), float(pos[1])
+
+    def robot_in_collision(self) -> bool:
+        """True if a MuJoCo contact touches the robot body (walls and obstacles only collide)."""
+        d = self.data
+        for i in range(d.ncon):
+            contact = d.contact[i]
+            if self.robot_geom in (contact.geom1, contact.geom2) and contact.dist <= 0.0:
+                return True
+        return False
+
+    # --- rendering ------------------------------------------------------------------------
+    def renderer(self) -> mujoco.Renderer:
+        if self._renderer is None:
+            r = mujoco.Renderer(self.model, self.config.camera_height, self.config.camera_width)
+            for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION,
+                         mujoco.mjtRndFlag.mjRND_SKYBOX):
+                r.scene.flags[flag] = 0
+            self._renderer = r
+        return self._renderer
+
+    def render_camera(self) -> np.ndarray:
+        """The robot camera image, (height, width, 3) uint8 RGB."""
+        r = self.renderer()
+        r.update_scene(self.data, camera=self.camera_id)
+        return r.render()
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

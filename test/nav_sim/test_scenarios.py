@@ -1,0 +1,94 @@
+from __future__ import annotations
+
+import math
+
+import pytest
+
+from nav_sim.config import SimConfig
+from nav_sim.errors import ScenarioError
+from nav_sim.scenarios import (
+    MIN_LAYOUT_DIFFERENCE,
+    clearance,
+    distance_to_obstacle,
+    layout_difference,
+    sample_scenario,
+)
+
+
+def test_same_seed_same_scenario_different_seed_different(sim):
+    a = sample_scenario(101, 'train', sim.banks, sim.world.geometry, sim.config)
+    b = sample_scenario(101, 'train', sim.banks, sim.world.geometry, sim.config)
+    c = sample_scenario(102, 'train', sim.banks, sim.world.geometry, sim.config)
+    assert a == b
+    assert (a.start, a.goal) != (c.start, c.goal)
+
+
+def test_splits_draw_from_their_own_bank(sim):
+    for seed in range(101, 111):
+        s = sample_scenario(seed, 'train', sim.banks, sim.world.geometry, sim.config)
+        assert s.layout in sim.banks['train']
+    for seed in range(201, 211):
+        s = sample_scenario(seed, 'heldout', sim.banks, sim.world.geometry, sim.config)
+        assert s.layout in sim.banks['heldout']
+
+
+def test_heldout_layouts_differ_from_every_training_layout(sim):
+    assert len(sim.banks['train']) == sim.config.train_layouts
+    assert len(sim.banks['heldout']) == sim.config.heldout_layouts
+    for held in sim.banks['heldout']:
+        for train in sim.banks['train']:
+            assert layout_difference(held, train) > MIN_LAYOUT_DIFFERENCE
+
+
+def test_scenarios_respect_constraints(sim):
+    geometry, cfg = sim.world.geometry, sim.config
+    for split in ('train', 'heldout'):
+        for seed in range(200):
+            s = sample_scenario(seed, split, sim.banks, geometry, cfg)
+            assert clearance(s.start[0], s.start[1], s.layout, geometry) > geometry.robot_radius
+            assert clearance(s.goal[0], s.goal[1], s.layout, geometry) > geometry.robot_radius
+            assert s.initial_distance >= cfg.min_start_goal_distance
+            assert math.isclose(s.initial_distance, math.dist(s.start[:2], s.goal))
+
+
+def test_layout_obstacles_keep_a_gap_a_robot_fits_through(sim):
+    geometry = sim.world.geometry
+    for layout in sim.banks['train'] + sim.banks['heldout']:
+        assert len(layout.placements) == sim.config.num_obstacles
+        for i, p in enumerate(layout.placements):
+            r = geometry.shapes[p.slot].bounding_radius
+            assert geometry.half_size - max(abs(p.x), abs(p.y)) - r > 2 * geometry.robot_radius
+            for q in layout.placements[i + 1:]:
+                r_q = geometry.shapes[q.slot].bounding_radius
+                gap = math.hypot(p.x - q.x, p.y - q.y) - r - r_q
+                assert gap > 2 * geometry.robot_radius
+
+
+def test_box_distance_is_signed(sim):
+    layout = sim.banks['train'][0]
+    place = layout.placements[0]
+    shape = sim.world.geometry.shapes[place.slot]
+    assert distance_to_obstacle(place.x, place.y, shape, place) < 0
+    assert distance_to_obstacle(place.x + 0.5, place.y + 0.5, shape, place) > 0.2
+
+
+@pytest.mark.parametrize('seed, split', [(-1, 'train'), (1.5, 'train'), ('7', 'train'),
+                                         (True, 'train'), (3, 'validation'), (3, '')])
+def test_bad_requests_are_rejected_clearly(sim, seed, split):
+    with pytest.raises(ScenarioError, match='seed|split'):
+        sample_scenario(seed, split, sim.banks, sim.world.geometry, sim.config)
+
+
+def test_split_aliases(sim):
+    a = sample_scenario(5, 'held-out', sim.banks, sim.world.geometry, sim.config)
+    b = sample_scenario(5, 'heldout', sim.banks, sim.world.geometry, sim.config)
+    assert a == b and a.split == 'heldout'
+
+
+def test_config_rejects_nonsense():
+    from nav_sim.errors import ConfigError
+    with pytest.raises(ConfigError, match='sim_dt'):
+        SimConfig(sim_dt=float('nan'))
+    with pytest.raises(ConfigError, match='unknown'):
+        SimConfig.from_dict({'fov': 90})
+    assert SimConfig.from_dict({'action_repeat': '4'}).action_repeat == 4

@@ -1,0 +1,150 @@
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from nav_sim.config import SimConfig
+from nav_sim.errors import EpisodeNotStartedError
+from nav_sim.sim import (
+    EVENT_COLLISION,
+    EVENT_GOAL,
+    EVENT_NONE,
+    NavSim,
+    WheelCommand,
+    twist_to_wheels,
+    wheels_to_twist,
+)
+
+CFG = SimConfig()
+FORWARD = twist_to_wheels(0.12, 0.0, CFG)
+LEFT = twist_to_wheels(0.0, 1.5, CFG)
+RIGHT = twist_to_wheels(0.0, -1.5, CFG)
+
+
+def place(sim: NavSim, x: float, y: float, yaw: float, goal: tuple[float, float]) -> None:
+    """Put robot and goal somewhere explicit, after a normal reset."""
+    sim.reset(0, 'train')
+    sim.world.set_goal(*goal)
+    sim.world.set_robot_pose(x, y, yaw)
+    sim.world.set_layout(type(sim.banks['train'][0])('train', -1, ()))  # no obstacles
+    import mujoco
+    mujoco.mj_forward(sim.world.model, sim.world.data)
+
+
+def test_render_shape_dtype_and_content(sim):
+    sim.reset(101, 'train')
+    image = sim.render()
+    assert image.shape == (CFG.camera_height, CFG.camera_width, 3)
+    assert image.dtype == np.uint8
+    assert image.std() > 1.0  # not a blank buffer
+
+
+def test_same_seed_gives_bit_identical_first_image():
+    a, b = NavSim(), NavSim()
+    try:
+        a.reset(205, 'heldout')
+        b.reset(0, 'train')
+        b.reset(205, 'heldout')
+        assert a.render().tobytes() == b.render().tobytes()
+        a.reset(206, 'heldout')
+        assert a.render().tobytes() != b.render().tobytes()
+    finally:
+        a.close()
+        b.close()
+
+
+def test_camera_looks_forward_and_sees_the_green_goal(sim):
+    place(sim, 0.0, 0.0, 0.0, goal=(0.5, 0.0))
+    ahead = sim.render().astype(int)
+    green = (ahead[..., 1] > 150) & (ahead[..., 0] < 100) & (ahead[..., 2] < 100)
+    assert green.sum() > 20
+    cols = np.nonzero(green)[1]
+    assert abs(cols.mean() - CFG.camera_width / 2) < 5  # centred
+    place(sim, 0.0, 0.0, math.pi / 2, goal=(0.5, 0.0))  # goal is to the robot's right
+    right = sim.render().astype(int)
+    green = (right[..., 1] > 150) & (right[..., 0] < 100) & (right[..., 2] < 100)
+    assert green.sum() == 0  # 90 degrees off-axis is outside the 48 degree field of view
+
+
+def test_each_action_moves_as_named(sim):
+    place(sim, 0.0, 0.0, 0.3, goal=(0.8, 0.8))
+    r = sim.step(FORWARD)
+    x, y, yaw = r.pose
+    travelled = math.hypot(x, y)
+    assert travelled == pytest.approx(0.12 * CFG.ctrl_dt, rel=1e-6)
+    assert math.atan2(y, x) == pytest.approx(0.3, abs=1e-6) and yaw == pytest.approx(0.3)
+    r = sim.step(LEFT)  # counter-clockwise, in place
+    assert r.pose[2] - yaw == pytest.approx(1.5 * CFG.ctrl_dt, rel=1e-6)
+    assert r.pose[:2] == pytest.approx((x, y), abs=1e-9)
+    r = sim.step(RIGHT)
+    assert r.pose[2] == pytest.approx(yaw, abs=1e-9)
+
+
+def test_goal_ends_the_period_early_and_stops_the_motors(sim):
+    place(sim, 0.0, 0.0, 0.0, goal=(CFG.goal_radius + 0.01, 0.0))
+    r = sim.step(FORWARD)
+    assert r.event == EVENT_GOAL and r.done
+    assert r.physics_steps < CFG.action_repeat
+    assert r.distance <= CFG.goal_radius
+    assert (sim.wheels.left, sim.wheels.right) == (0.0, 0.0)
+    pose = r.pose
+    r = sim.step(FORWARD)  # the episode is over: nothing moves until reset
+    assert r.pose == pose and r.physics_steps == 0 and r.event == EVENT_GOAL
+
+
+def test_collision_ends_the_period_early_and_stops_the_motors(sim):
+    gap = 0.005  # 5 mm from the east wall
+    place(sim, 1.0 - sim.world.geometry.robot_radius - gap, 0.0, 0.0, goal=(-0.5, 0.0))
+    r = sim.step(FORWARD)
+    assert r.event == EVENT_COLLISION and r.done
+    assert 1 <= r.physics_steps < CFG.action_repeat
+    assert (sim.wheels.left, sim.wheels.right) == (0.0, 0.0)
+
+
+def test_obstacles_collide(sim):
+    scenario = sim.reset(101, 'train')
+    p = scenario.layout.placements[0]
+    shape = sim.world.geometry.shapes[p.slot]
+    d = shape.bounding_radius + sim.world.geometry.robot_radius + 0.01
+    sim.world.set_robot_pose(p.x - d, p.y, 0.0)
+    events = [sim.step(FORWARD).event for _ in range(10)]
+    assert EVENT_COLLISION in events
+
+
+def test_free_driving_reports_no_event(sim):
+    place(sim, -0.5, 0.0, 0.0, goal=(0.8, 0.8))
+    assert sim.step(FORWARD).event == EVENT_NONE
+
+
+def test_step_before_reset_is_an_error():
+    fresh = NavSim()
+    try:
+        with pytest.raises(EpisodeNotStartedError, match='reset'):
+            fresh.step(FORWARD)
+    finally:
+        fresh.close()
+
+
+def test_kinematics_round_trip_and_saturation():
+    cmd = twist_to_wheels(0.05, 0.4, CFG)
+    assert not cmd.saturated
+    assert wheels_to_twist(cmd.left, cmd.right, CFG) == pytest.approx((0.05, 0.4))
+    huge = twist_to_wheels(100.0, 50.0, CFG)
+    assert huge.saturated
+    assert max(abs(huge.left), abs(huge.right)) == pytest.approx(CFG.max_wheel_speed)
+    v, w = wheels_to_twist(huge.left, huge.right, CFG)
+    assert w / v == pytest.approx(0.5)  # curvature kept
+    with pytest.raises(ValueError, match='non-finite'):
+        twist_to_wheels(float('nan'), 0.0, CFG)
+
+
+def test_sim_time_is_monotonic_across_resets(sim):
+    sim.reset(1, 'train')
+    t0 = sim.sim_time_ns
+    sim.step(WheelCommand(0.0, 0.0))
+    t1 = sim.sim_time_ns
+    sim.reset(2, 'train')
+    assert t0 < t1 < sim.sim_time_ns
+    assert t1 - t0 == CFG.action_repeat * round(CFG.sim_dt * 1e9)
