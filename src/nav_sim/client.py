@@ -25,6 +25,7 @@ from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
@@ -57,7 +58,9 @@ class SimClient:
         self.namespace = namespace.rstrip('/')
         self.timeout = timeout
         self.context = rclpy.Context()
-        rclpy.init(context=self.context)
+        # A library must not take over Ctrl-C: the application decides (training saves a
+        # checkpoint on KeyboardInterrupt), so this context installs no signal handlers.
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
         # no parameter services or rosout: fewer entities in every wait of the hot path
         self.node = rclpy.create_node(node_name, namespace=self.namespace or '/',
                                       context=self.context, start_parameter_services=False,

@@ -1,0 +1,27 @@
+"""Specific errors of nav_gym, each saying what to do next."""
+
+from __future__ import annotations
+
+
+class NavGymError(Exception):
+    """Base class of every nav_gym error."""
+
+
+class InvalidActionError(NavGymError, ValueError):
+    """An action outside ``Discrete(3)``."""
+
+
+class ObservationError(NavGymError, ValueError):
+    """A camera image that cannot be turned into an observation."""
+
+
+class ResetNeededError(NavGymError, RuntimeError):
+    """step() was called before reset() or after the episode ended."""
+
+
+class CheckpointError(NavGymError, RuntimeError):
+    """A checkpoint is missing, corrupt or incompatible."""
+
+
+class TrainConfigError(NavGymError, ValueError):
+    """A training configuration value is invalid."""

@@ -1,0 +1,128 @@
+"""Training configuration: the workshop's DQN settings, overridable from YAML and the command
+line; the effective configuration is saved with each run."""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from nav_gym.config import EnvConfig
+from nav_gym.errors import TrainConfigError
+
+
+def _f(default: Any, help: str) -> Any:
+    return field(default=default, metadata={'help': help})
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """DQN('CnnPolicy') on Monitor(NavigationEnv); defaults are the workshop's."""
+
+    total_timesteps: int = _f(50_000, 'environment steps to train for')
+    learning_rate: float = _f(1e-4, 'optimiser step size')
+    buffer_size: int = _f(50_000, 'replay buffer capacity (transitions)')
+    learning_starts: int = _f(2_000, 'steps collected before gradient updates begin')
+    batch_size: int = _f(32, 'transitions per gradient step')
+    gamma: float = _f(0.99, 'discount factor')
+    train_freq: int = _f(4, 'environment steps between gradient updates (SB3 default)')
+    gradient_steps: int = _f(1, 'gradient steps per update (SB3 default)')
+    target_update_interval: int = _f(1_000, 'steps between target-network updates')
+    exploration_fraction: float = _f(0.25, 'fraction of training over which epsilon decays')
+    exploration_initial_eps: float = _f(1.0, 'initial epsilon (SB3 default)')
+    exploration_final_eps: float = _f(0.05, 'final epsilon')
+    seed: int = _f(9, 'seed of DQN, the env and its scenario sequence')
+    checkpoint_freq: int = _f(10_000, 'steps between checkpoints (all are kept)')
+    save_replay_buffer: bool = _f(True, 'save the replay buffer with checkpoints (for --resume)')
+    device: str = _f('auto', "torch device: 'auto', 'cpu' or 'cuda'")
+    runs_dir: str = _f('runs', 'directory that holds one sub-directory per run')
+    run_name: str = _f('', "run directory name ('' = dqn_<date>_<time>)")
+    split: str = _f('train', 'scenario bank used for training')
+    max_episode_steps: int = _f(250, 'control periods before an episode is truncated')
+    namespace: str = _f('', 'ROS namespace of the sim node')
+    sim: str = _f('auto', "'auto', 'attach' or 'embedded' (see EnvConfig)")
+    sim_timeout: float = _f(5.0, 'seconds to wait for the sim before failing')
+
+    def __post_init__(self) -> None:
+        for name in ('total_timesteps', 'buffer_size', 'batch_size', 'train_freq',
+                     'gradient_steps', 'target_update_interval', 'checkpoint_freq'):
+            if int(getattr(self, name)) < 1:
+                raise TrainConfigError(f'{name} must be >= 1, got {getattr(self, name)!r}')
+        if self.learning_starts < 0:
+            raise TrainConfigError('learning_starts must be >= 0')
+        if not 0 < self.exploration_fraction <= 1:
+            raise TrainConfigError('exploration_fraction must be in (0, 1]')
+
+    def env_config(self) -> EnvConfig:
+        return EnvConfig(namespace=self.namespace, sim=self.sim, sim_timeout=self.sim_timeout,
+                         split=self.split, max_episode_steps=self.max_episode_steps)
+
+    def dqn_kwargs(self) -> dict[str, Any]:
+        keys = ('learning_rate', 'buffer_size', 'learning_starts', 'batch_size', 'gamma',
+                'train_freq', 'gradient_steps', 'target_update_interval',
+                'exploration_fraction', 'exploration_initial_eps', 'exploration_final_eps',
+                'seed', 'device')
+        return {k: getattr(self, k) for k in keys}
+
+    def to_yaml(self) -> str:
+        return yaml.safe_dump(dataclasses.asdict(self), sort_keys=False)
+
+
+FIELDS = {f.name: f for f in dataclasses.fields(TrainConfig)}
+
+
+def coerce(values: dict[str, Any], source: str) -> dict[str, Any]:
+    """Check names and convert types of overrides (YAML or command line)."""
+    unknown = sorted(set(values) - set(FIELDS))
+    if unknown:
+        raise TrainConfigError(f'{source}: unknown setting(s) {unknown}; known: {sorted(FIELDS)}')
+    out = {}
+    for key, value in values.items():
+        kind = type(FIELDS[key].default)
+        try:
+            if kind is bool and isinstance(value, str):
+                if value.lower() not in ('true', 'false', '1', '0', 'yes', 'no'):
+                    raise ValueError(value)
+                out[key] = value.lower() in ('true', '1', 'yes')
+            elif kind is int and isinstance(value, (str, float)):
+                number = float(value)
+                if not number.is_integer():
+                    raise ValueError(value)
+                out[key] = int(number)
+            else:
+                out[key] = kind(value)
+        except (TypeError, ValueError):
+            raise TrainConfigError(
+                f'{source}: {key} must be {kind.__name__}, got {value!r}') from None
+    return out
+
+
+def load_yaml(path: str | Path) -> dict[str, Any]:
+    try:
+        data = yaml.safe_load(Path(path).read_text()) or {}
+    except (OSError, yaml.YAMLError) as exc:
+        raise TrainConfigError(f'cannot read training config {path}: {exc}') from exc
+    if not isinstance(data, dict):
+        raise TrainConfigError(f'{path}: expected a mapping of settings')
+    return coerce(data, str(path))
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """One ``--flag`` per field; only flags given on the command line override."""
+    for name, f in FIELDS.items():
+        flag = '--' + name.replace('_', '-')
+        parser.add_argument(flag, dest=name, default=argparse.SUPPRESS, metavar='V',
+                            help=f"{f.metadata['help']} (default {f.default!r})")
+
+
+def build(config_file: str | None, overrides: dict[str, Any],
+          base: dict[str, Any] | None = None) -> TrainConfig:
+    values = dict(base or {})
+    if config_file:
+        values.update(load_yaml(config_file))
+    values.update(coerce(overrides, 'command line'))
+    return TrainConfig(**values)

@@ -1,0 +1,135 @@
+"""The validation, scripted-episode and training commands, run as ``ros2 run`` would."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+from ament_index_python.packages import get_package_prefix
+
+from nav_gym.errors import CheckpointError, TrainConfigError
+from nav_gym.train import checkpoints, load_model
+from nav_gym.train_config import build
+
+SMOKE = ['--total-timesteps', '300', '--learning-starts', '100', '--checkpoint-freq', '150',
+         '--buffer-size', '1000', '--sim', 'embedded']
+
+
+def ros2_run(package: str, executable: str) -> str:
+    return str(Path(get_package_prefix(package)) / 'lib' / package / executable)
+
+
+def run(args: list[str], timeout: float = 300) -> subprocess.CompletedProcess:
+    return subprocess.run(args, capture_output=True, text=True, timeout=timeout)
+
+
+def leftover_sims(marker: str) -> list[str]:
+    out = subprocess.run(['pgrep', '-af', marker], capture_output=True, text=True).stdout
+    return [line for line in out.splitlines() if 'pgrep' not in line]
+
+
+def test_validate_prints_a_passing_checklist(tmp_path):
+    result = run([ros2_run('nav_gym', 'validate'), '--sim', 'embedded', '--json',
+                  str(tmp_path / 'checks.json')])
+    assert result.returncode == 0, result.stdout + result.stderr
+    for name in ('Observation shape', 'Observation dtype', 'Observation range', 'Action space',
+                 'Reset reproducibility', 'Goal detection', 'Collision detection', 'Timeout',
+                 'Motor stop', 'check_env() (SB3)', 'check_env() (Gymnasium)'):
+        assert f'PASS  {name}' in result.stdout
+    assert '12 passed, 0 failed' in result.stdout
+    checks = json.loads((tmp_path / 'checks.json').read_text())
+    assert all(c['passed'] for c in checks) and len(checks) == 12
+
+
+def test_validate_fails_visibly_without_a_sim():
+    result = run([ros2_run('nav_gym', 'validate'), '--sim', 'attach', '--namespace',
+                  '/nobody_here', '--sim-timeout', '1'])
+    assert result.returncode == 1
+    assert 'ros2 run nav_sim sim_node' in result.stderr and 'Traceback' not in result.stderr
+
+
+def test_scripted_episode_prints_each_transition_and_stops():
+    result = run([ros2_run('nav_gym', 'episode'), '--seed', '101', '--sim', 'embedded'])
+    assert result.returncode == 0, result.stderr
+    out = result.stdout
+    assert 'initial distance:' in out and 'scenario: seed 101' in out
+    assert '1 forward' in out and '0 left' in out and '2 right' in out
+    assert 'robot stopped' in out
+
+
+def test_smoke_training_checkpoints_resumes_and_loads(tmp_path):
+    import numpy as np
+    result = run([ros2_run('nav_gym', 'train'), *SMOKE, '--runs-dir', str(tmp_path),
+                  '--run-name', 'smoke'])
+    assert result.returncode == 0, result.stdout + result.stderr
+    run_dir = tmp_path / 'smoke'
+    assert [s for s, _ in checkpoints(run_dir)] == [0, 150, 300]
+    for name in ('config.yaml', 'monitor.csv', 'final_model.zip', 'summary.json'):
+        assert (run_dir / name).is_file()
+    assert (run_dir / 'monitor.csv').read_text().startswith('#{')
+    assert any((run_dir / 'tb').rglob('events.out.tfevents.*'))
+    summary = json.loads((run_dir / 'summary.json').read_text())
+    assert summary['num_timesteps'] == 300 and 0 < summary['env_share'] < 1
+    assert summary['config']['learning_rate'] == 1e-4 and summary['config']['seed'] == 9
+
+    result = run([ros2_run('nav_gym', 'train'), '--resume', str(run_dir),
+                  '--total-timesteps', '450'])
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert 'from dqn_300_steps.zip (step 300) with its replay buffer' in result.stdout
+    assert '150 steps remain' in result.stdout
+    steps = [s for s, _ in checkpoints(run_dir)]
+    # SB3 collects train_freq (4) steps per rollout, so a run can end a few steps past its total
+    assert 450 in steps and 450 <= steps[-1] < 454
+
+    from stable_baselines3 import DQN
+    model = DQN.load(run_dir / 'final_model.zip', device='cpu')
+    assert model.num_timesteps == steps[-1]
+    action, _ = model.predict(np.zeros((3, 84, 84), np.uint8), deterministic=True)
+    assert int(action) in (0, 1, 2)
+
+    corrupt = checkpoints(run_dir)[-1][1]
+    corrupt.write_bytes(b'not a zip file')
+    result = run([ros2_run('nav_gym', 'train'), '--resume', str(run_dir)])
+    assert result.returncode == 1
+    assert 'corrupt or incompatible' in result.stderr and 'Traceback' not in result.stderr
+    with pytest.raises(CheckpointError, match=corrupt.name):
+        load_model(corrupt, None, 'cpu')
+
+
+def test_ctrl_c_saves_a_checkpoint_and_reaps_the_sim(tmp_path):
+    namespace = f'/sigint_{time.monotonic_ns()}'
+    process = subprocess.Popen(
+        [ros2_run('nav_gym', 'train'), '--total-timesteps', '100000', '--learning-starts', '50',
+         '--buffer-size', '1000', '--runs-dir', str(tmp_path), '--run-name', 'stop',
+         '--sim', 'embedded', '--namespace', namespace],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    run_dir = tmp_path / 'stop'
+    deadline = time.monotonic() + 120
+    while not (run_dir / 'checkpoints' / 'dqn_0_steps.zip').exists():
+        assert process.poll() is None and time.monotonic() < deadline
+        time.sleep(0.2)
+    time.sleep(3.0)
+    process.send_signal(signal.SIGINT)
+    out, err = process.communicate(timeout=120)
+    assert process.returncode == 130, out + err
+    assert 'interrupted at step' in out and 'Traceback' not in err
+    steps = checkpoints(run_dir)[-1][0]
+    assert steps > 0
+    assert json.loads((run_dir / 'summary.json').read_text())['interrupted'] is True
+    assert leftover_sims(namespace) == []
+
+
+def test_config_file_and_flags_override_defaults(tmp_path):
+    path = tmp_path / 'train.yaml'
+    path.write_text('learning_rate: 0.0005\ntotal_timesteps: 1000\n')
+    config = build(str(path), {'total_timesteps': '2000'})
+    assert (config.learning_rate, config.total_timesteps, config.gamma) == (5e-4, 2000, 0.99)
+    with pytest.raises(TrainConfigError, match='unknown setting'):
+        build(None, {'learning_rat': 1})
+    path.write_text('batch_size: many\n')
+    with pytest.raises(TrainConfigError, match='batch_size must be int'):
+        build(str(path), {})
