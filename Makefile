@@ -16,17 +16,23 @@ export MUJOCO_GL ?= egl
 
 .PHONY: run test test-slow setup system-deps lint bench demo clean
 
+# the main job: validate the env -> train 50k steps -> evaluate -> diagnose -> report (runs/)
 run: setup
+	$(VENV)/bin/visnav-pipeline $(ARGS)
+
+# start the sim node as `ros2 run nav_sim sim_node` would and drive one scripted episode
+demo: setup
 	$(VENV)/bin/nav-sim-demo
 
 test: setup
 	$(PY) -m pytest -q
 
 test-slow: setup
-	$(PY) -m pytest -q -m slow
+	$(PY) -m pytest -q -s -m slow
 
 bench: setup
 	$(PY) benchmarks/bench_sim.py
+	$(PY) benchmarks/bench_env.py
 
 lint: setup
 	$(VENV)/bin/ruff check src test benchmarks

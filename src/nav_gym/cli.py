@@ -25,6 +25,13 @@ def env_config(args: argparse.Namespace, **extra: Any) -> EnvConfig:
                      **extra)
 
 
+def strip_ros_args(argv: list[str] | None) -> list[str]:
+    """The command's own arguments: drop a trailing ``--ros-args ...`` block (ros2 run passes
+    it through)."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    return args[:args.index('--ros-args')] if '--ros-args' in args else args
+
+
 def run_command(name: str, body: Callable[[], int]) -> None:
     """Run a command body: readable one-line errors, exit 130 on Ctrl-C, never a traceback."""
     try:

@@ -87,7 +87,7 @@ class NavigationEnv(gym.Env):
                                        node_name=f'visnav_env_{os.getpid()}')
                 params = {'publish_clock': False, **cfg.sim_params}
                 self._sim_process = SimProcess(namespace=namespace, params=params)
-                client.wait_for_sim(max(cfg.sim_timeout, 30.0))
+                client.wait_for_sim(max(cfg.sim_timeout, 30.0), self._sim_process.failure)
         except BaseException:
             client.close()
             self._stop_sim()
@@ -103,6 +103,11 @@ class NavigationEnv(gym.Env):
     @property
     def namespace(self) -> str:
         return self.client.namespace
+
+    @property
+    def last_stamp_ns(self) -> int:
+        """Sim-time stamp of the latest observation (-1 before the first reset)."""
+        return -1 if self._frame is None else self._frame.stamp_ns
 
     # --- Gymnasium API --------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from nav_gym import train_config
-from nav_gym.cli import run_command
+from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.env import NavigationEnv
 from nav_gym.errors import CheckpointError
 from nav_gym.timing import EnvTimer
@@ -200,7 +200,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--resume', metavar='RUN_DIR', help='continue a run from its newest '
                         'checkpoint (its config.yaml is the base; flags still override)')
     train_config.add_arguments(parser)
-    args, _ros_args = parser.parse_known_args(_strip_ros_args(argv))
+    args, _ros_args = parser.parse_known_args(strip_ros_args(argv))
     overrides = {k: v for k, v in vars(args).items() if k in train_config.FIELDS}
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
 
@@ -222,12 +222,6 @@ def main(argv: list[str] | None = None) -> None:
         return 130 if summary['interrupted'] else 0
 
     run_command('nav-gym-train', body)
-
-
-def _strip_ros_args(argv: list[str] | None) -> list[str]:
-    """Drop a trailing ``--ros-args ...`` block (ros2 run passes it through)."""
-    args = list(sys.argv[1:] if argv is None else argv)
-    return args[:args.index('--ros-args')] if '--ros-args' in args else args
 
 
 def _raise_keyboard_interrupt(signum: int, frame: Any) -> None:

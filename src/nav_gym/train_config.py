@@ -46,6 +46,10 @@ class TrainConfig:
     namespace: str = _f('', 'ROS namespace of the sim node')
     sim: str = _f('auto', "'auto', 'attach' or 'embedded' (see EnvConfig)")
     sim_timeout: float = _f(5.0, 'seconds to wait for the sim before failing')
+    forward_speed: float = _f(EnvConfig.forward_speed, 'action 1 (forward): linear velocity, m/s')
+    turn_rate: float = _f(EnvConfig.turn_rate, 'actions 0/2: angular velocity in place, rad/s')
+    sim_params: dict = _f(None, 'sim_node parameters for a sim the env starts itself, as a '
+                          'mapping (YAML) or JSON on the command line, e.g. \'{"sim_dt": 0.016}\'')
 
     def __post_init__(self) -> None:
         for name in ('total_timesteps', 'buffer_size', 'batch_size', 'train_freq',
@@ -56,10 +60,16 @@ class TrainConfig:
             raise TrainConfigError('learning_starts must be >= 0')
         if not 0 < self.exploration_fraction <= 1:
             raise TrainConfigError('exploration_fraction must be in (0, 1]')
+        if self.sim_params is None:
+            object.__setattr__(self, 'sim_params', {})
+        if not isinstance(self.sim_params, dict):
+            raise TrainConfigError(f'sim_params must be a mapping, got {self.sim_params!r}')
 
     def env_config(self) -> EnvConfig:
         return EnvConfig(namespace=self.namespace, sim=self.sim, sim_timeout=self.sim_timeout,
-                         split=self.split, max_episode_steps=self.max_episode_steps)
+                         split=self.split, max_episode_steps=self.max_episode_steps,
+                         forward_speed=self.forward_speed, turn_rate=self.turn_rate,
+                         sim_params=dict(self.sim_params))
 
     def dqn_kwargs(self) -> dict[str, Any]:
         keys = ('learning_rate', 'buffer_size', 'learning_starts', 'batch_size', 'gamma',
@@ -84,6 +94,12 @@ def coerce(values: dict[str, Any], source: str) -> dict[str, Any]:
     for key, value in values.items():
         kind = type(FIELDS[key].default)
         try:
+            if key == 'sim_params':
+                parsed = yaml.safe_load(value) if isinstance(value, str) else value
+                if not isinstance(parsed, dict):
+                    raise ValueError(value)
+                out[key] = parsed
+                continue
             if kind is bool and isinstance(value, str):
                 if value.lower() not in ('true', 'false', '1', '0', 'yes', 'no'):
                     raise ValueError(value)
@@ -96,8 +112,8 @@ def coerce(values: dict[str, Any], source: str) -> dict[str, Any]:
             else:
                 out[key] = kind(value)
         except (TypeError, ValueError):
-            raise TrainConfigError(
-                f'{source}: {key} must be {kind.__name__}, got {value!r}') from None
+            what = 'a mapping' if key == 'sim_params' else kind.__name__
+            raise TrainConfigError(f'{source}: {key} must be {what}, got {value!r}') from None
     return out
 
 

@@ -175,11 +175,18 @@ class SimClient:
         return future.result()
 
     # --- public API -----------------------------------------------------------------------
-    def wait_for_sim(self, timeout: float | None = None) -> None:
-        """Block until the sim's camera topic and reset service exist, or raise with advice."""
+    def wait_for_sim(self, timeout: float | None = None,
+                     abort: Callable[[], str | None] | None = None) -> None:
+        """Block until the sim's camera topic and reset service exist, or raise with advice.
+
+        ``abort`` is polled while waiting; a message from it ends the wait at once (e.g. the
+        sim process this client started has died)."""
         limit = timeout or self.timeout
         deadline = time.monotonic() + limit
         while not (self.sim_present() and self.cli_reset.service_is_ready()):
+            reason = abort() if abort is not None else None
+            if reason:
+                raise SimUnavailableError(f'nav_sim in {self.where} did not start: {reason}')
             if time.monotonic() > deadline:
                 raise SimUnavailableError(
                     f'no nav_sim node found in {self.where} after {limit} s; start one with '

@@ -37,6 +37,8 @@ class SimConfig:
     camera_width: int = _f(128, 'native camera image width in pixels')
     camera_height: int = _f(96, 'native camera image height in pixels')
     camera_hfov_deg: float = _f(48.0, 'horizontal field of view in degrees (e-puck: 0.84 rad)')
+    camera_near_clip: float = _f(0.005, 'camera near clipping distance in metres (surfaces '
+                                 'closer than this are not drawn)')
     goal_radius: float = _f(0.1, 'success when the robot centre is this close to the goal (m)')
     goal_marker_radius: float = _f(0.05, 'radius of the green goal cylinder in metres')
     goal_marker_height: float = _f(0.1, 'height of the green goal cylinder in metres')
@@ -61,6 +63,7 @@ class SimConfig:
 
     def __post_init__(self) -> None:
         positive = ('sim_dt', 'wheel_radius', 'axle_length', 'max_wheel_speed', 'goal_radius',
+                    'camera_near_clip',
                     'goal_marker_radius', 'goal_marker_height', 'min_start_goal_distance')
         for name in positive:
             value = getattr(self, name)

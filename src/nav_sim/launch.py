@@ -2,14 +2,41 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import subprocess
 import sys
+import tempfile
 from collections.abc import Mapping
 from typing import Any
 
+from nav_sim.config import NodeConfig, SimConfig
+from nav_sim.errors import ConfigError
 from nav_sim.paths import package_prefix
+
+_PARAM_TYPES = {f.name: type(f.default) for c in (SimConfig, NodeConfig)
+                for f in dataclasses.fields(c)}
+
+
+def typed_params(params: Mapping[str, Any]) -> dict[str, Any]:
+    """Convert values to the declared type of each sim_node parameter (a YAML ``90`` for a
+    double parameter must reach the node as ``90.0``); unknown names raise ConfigError."""
+    unknown = sorted(set(params) - set(_PARAM_TYPES))
+    if unknown:
+        raise ConfigError(f'unknown sim_node parameter(s) {unknown}; known: '
+                          f'{sorted(_PARAM_TYPES)}')
+    out = {}
+    for key, value in params.items():
+        kind = _PARAM_TYPES[key]
+        try:
+            out[key] = value if kind is bool and isinstance(value, bool) else kind(value)
+        except (TypeError, ValueError) as exc:
+            raise ConfigError(f'sim_node parameter {key}: cannot convert {value!r} to '
+                              f'{kind.__name__}') from exc
+        if kind is int and isinstance(value, float) and not value.is_integer():
+            raise ConfigError(f'sim_node parameter {key} must be an integer, got {value!r}')
+    return out
 
 
 def executable_command() -> list[str]:
@@ -30,8 +57,13 @@ def ros_args(namespace: str = '', params: Mapping[str, Any] | None = None,
         args += ['-r', f'__ns:={namespace}']
     if params_file:
         args += ['--params-file', params_file]
-    for key, value in (params or {}).items():
-        text = str(value).lower() if isinstance(value, bool) else str(value)
+    for key, value in typed_params(params or {}).items():
+        if isinstance(value, bool):
+            text = str(value).lower()
+        elif isinstance(value, float):
+            text = repr(value)  # always has a '.' or an exponent: parsed as a double
+        else:
+            text = str(value)
         args += ['-p', f'{key}:={text}']
     return args
 
@@ -43,10 +75,24 @@ class SimProcess:
                  params_file: str | None = None, quiet: bool = True,
                  env: Mapping[str, str] | None = None) -> None:
         command = executable_command() + ros_args(namespace, params, params_file)
-        out = subprocess.DEVNULL if quiet else None
-        self.process = subprocess.Popen(command, stdout=out, stderr=out,
+        # quiet: keep stderr (the node's log) in a temporary file to explain a failed start
+        self._log = tempfile.TemporaryFile() if quiet else None
+        self.process = subprocess.Popen(command, stdout=subprocess.DEVNULL if quiet else None,
+                                        stderr=self._log,
                                         env=dict(env) if env is not None else None)
         self.namespace = namespace
+
+    def failure(self) -> str | None:
+        """None while the process runs; else its exit code and the end of its log."""
+        code = self.process.poll()
+        if code is None:
+            return None
+        tail = ''
+        if self._log is not None:
+            self._log.seek(0)
+            lines = self._log.read().decode(errors='replace').strip().splitlines()
+            tail = ': ' + ' | '.join(lines[-5:]) if lines else ''
+        return f'sim_node exited with code {code}{tail}'
 
     def alive(self) -> bool:
         return self.process.poll() is None
@@ -60,6 +106,9 @@ class SimProcess:
             except subprocess.TimeoutExpired:
                 self.process.kill()
                 self.process.wait()
+        if self._log is not None:
+            self._log.close()
+            self._log = None
         return self.process.returncode
 
     def __enter__(self) -> SimProcess:

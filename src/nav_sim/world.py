@@ -41,6 +41,10 @@ class World:
         m.vis.global_.offheight = max(cfg.camera_height, 1)
         cam = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA)
         m.cam_fovy[cam] = cfg.camera_fovy_deg
+        # MuJoCo's clipping planes are relative to the model extent, which the parked obstacle
+        # slots inflate to metres: the default near plane would hide anything within ~7 cm of
+        # the camera (the goal at the moment of success, a wall just before a collision).
+        m.vis.map.znear = cfg.camera_near_clip / m.stat.extent
         goal = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, 'goal')
         m.geom_size[goal, :2] = (cfg.goal_marker_radius, cfg.goal_marker_height / 2.0)
         m.geom_rbound[goal] = math.hypot(cfg.goal_marker_radius, cfg.goal_marker_height / 2.0)

@@ -148,3 +148,28 @@ def test_sim_time_is_monotonic_across_resets(sim):
     sim.reset(2, 'train')
     assert t0 < t1 < sim.sim_time_ns
     assert t1 - t0 == CFG.action_repeat * round(CFG.sim_dt * 1e9)
+
+
+def green_share(image: np.ndarray) -> float:
+    r, g, b = (image[..., i].astype(int) for i in range(3))
+    return float(((g > 120) & (g - r > 60) & (g - b > 60)).mean())
+
+
+def test_the_goal_stays_visible_up_to_the_success_distance(sim):
+    """At the success radius the camera is ~1 cm from the goal marker: it must fill the view
+    (MuJoCo's default near plane, relative to the model extent, used to clip it away)."""
+    distance = CFG.goal_radius + 0.005  # just outside success
+    place(sim, 0.0, 0.0, 0.0, (distance, 0.0))
+    assert sim.distance > CFG.goal_radius
+    assert green_share(sim.render()) > 0.5
+
+
+def test_a_wall_just_ahead_is_seen(sim):
+    """A wall 2 cm in front of the camera fills the image (no see-through near clipping)."""
+    wall_x = 1.0  # inner face of the east wall
+    camera_ahead = 0.038
+    place(sim, wall_x - camera_ahead - 0.02, 0.0, 0.0, (-0.5, 0.0))
+    image = sim.render().astype(int)
+    wall = np.array([0.78, 0.76, 0.70]) * 255
+    centre = image[20:76, 30:98].reshape(-1, 3)
+    assert float(np.mean(np.abs(centre - wall).max(axis=1) < 60)) > 0.9

@@ -1,0 +1,137 @@
+"""Env steps/s through the ROS wrapper vs. the sim core in process, and the env's share of DQN
+training time, measured side by side in one run.
+
+    .venv/bin/python benchmarks/bench_env.py [--steps 2000] [--dqn-steps 3000]
+
+1. The same random action sequence (seeded) drives both loops, with the same work per step:
+   one control period (action repeat with goal/collision checks), one camera render, the
+   conversion to a (3, 84, 84) observation and the reward; an episode end triggers a reset.
+   The ROS loop adds the env's lockstep round trip through the nav_sim node.
+2. A short DQN('CnnPolicy') run with the workshop settings (learning starts after
+   ``--learning-starts`` steps) through the ROS env: the share of wall-clock time spent inside
+   ``env.step``/``env.reset`` against the learner.  Target: under 20% on a 2-core machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+
+os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
+
+import numpy as np  # noqa: E402
+
+from nav_gym.config import EnvConfig  # noqa: E402
+from nav_gym.env import NavigationEnv, reward_terms  # noqa: E402
+from nav_gym.observation import rgb_to_observation  # noqa: E402
+from nav_gym.timing import EnvTimer  # noqa: E402
+from nav_sim.sim import NavSim, twist_to_wheels  # noqa: E402
+
+
+def actions(n: int) -> np.ndarray:
+    return np.random.default_rng(0).integers(0, 3, size=n)
+
+
+def in_process(steps: int, config: EnvConfig) -> float:
+    """The env's work without ROS: NavSim + observation + reward, resets at episode ends."""
+    sim = NavSim()
+    speeds = {0: (0.0, config.turn_rate), 1: (config.forward_speed, 0.0),
+              2: (0.0, -config.turn_rate)}
+    commands = {a: twist_to_wheels(*v, sim.config) for a, v in speeds.items()}
+    seed = 0
+    try:
+        start = time.perf_counter()
+        sim.reset(seed, 'train')
+        rgb_to_observation(sim.render())
+        distance, count = sim.distance, 0
+        for action in actions(steps):
+            result = sim.step(commands[int(action)])
+            rgb_to_observation(sim.render())
+            reward_terms(distance, result.distance, result.event, config)
+            distance, count = result.distance, count + 1
+            if result.done or count >= config.max_episode_steps:
+                seed, count = seed + 1, 0
+                sim.reset(seed, 'train')
+                rgb_to_observation(sim.render())
+                distance = sim.distance
+        return steps / (time.perf_counter() - start)
+    finally:
+        sim.close()
+
+
+def through_ros(steps: int, config: EnvConfig) -> float:
+    env = NavigationEnv(config)
+    try:
+        env.reset(seed=0)
+        for action in actions(50):  # warm-up
+            if any(env.step(int(action))[2:4]):
+                env.reset()
+        start = time.perf_counter()
+        env.reset(seed=0)
+        for action in actions(steps):
+            if any(env.step(int(action))[2:4]):
+                env.reset()
+        return steps / (time.perf_counter() - start)
+    finally:
+        env.close()
+
+
+def dqn_share(steps: int, learning_starts: int, config: EnvConfig
+              ) -> tuple[float, float, float, float]:
+    """(env seconds, wall seconds, steps/s, env share) of a short DQN run through ROS."""
+    from stable_baselines3 import DQN
+
+    from nav_gym.train_config import TrainConfig
+    timer = EnvTimer(NavigationEnv(config))
+    try:
+        kwargs = {**TrainConfig().dqn_kwargs(), 'learning_starts': learning_starts,
+                  'buffer_size': max(steps, 1000), 'device': 'cpu'}
+        model = DQN('CnnPolicy', timer, verbose=0, **kwargs)
+        start = time.perf_counter()
+        model.learn(steps)
+        wall = time.perf_counter() - start
+    finally:
+        timer.close()
+    return timer.env_seconds, wall, steps / wall, timer.env_seconds / wall
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--steps', type=int, default=2000)
+    parser.add_argument('--repeats', type=int, default=2, help='alternating runs; best kept')
+    parser.add_argument('--dqn-steps', type=int, default=3000)
+    parser.add_argument('--learning-starts', type=int, default=500)
+    args = parser.parse_args()
+    config = EnvConfig(sim='embedded')
+    core, ros = [], []
+    for _ in range(args.repeats):
+        core.append(in_process(args.steps, config))
+        ros.append(through_ros(args.steps, config))
+    best_core, best_ros = max(core), max(ros)
+    print(f'env steps/s, {args.steps} random-action steps, best of {args.repeats} '
+          'alternating runs')
+    print(f'  sim core in process (step+render+obs+reward): {best_core:7.0f} /s  '
+          f'runs: {[round(v) for v in core]}')
+    print(f'  NavigationEnv through the nav_sim node:       {best_ros:7.0f} /s  '
+          f'runs: {[round(v) for v in ros]}')
+    print(f'  ratio ROS env / in process:                   {best_ros / best_core:7.1%}')
+    env_s, wall, rate, share = dqn_share(args.dqn_steps, args.learning_starts, config)
+    # the rest of the wall time is the learner (and SB3's bookkeeping), which only trains
+    # after learning_starts: extrapolate both to the workshop's 50k steps / 2k learning_starts
+    env_per_step = env_s / args.dqn_steps
+    learner_per_step = (wall - env_s) / max(args.dqn_steps - args.learning_starts, 1)
+    full = env_per_step * 50_000 / (env_per_step * 50_000 + learner_per_step * 48_000)
+    print(f'DQN CnnPolicy, {args.dqn_steps} steps ({args.learning_starts} before learning '
+          f'starts): {wall:.1f} s, {rate:.0f} steps/s; env {env_per_step * 1e3:.2f} ms/step, '
+          f'learner {learner_per_step * 1e3:.2f} ms per learning step')
+    print(f'  env share of this run\'s wall-clock:          {share:7.1%}')
+    print(f'  extrapolated to 50k steps (2k before learning): {full:5.1%}  (target < 20%: '
+          f"{'met' if full < 0.2 else 'NOT met'})")
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,313 @@
+"""Deterministic evaluation of a training run on fixed seeds (Part 4 of the workshop).
+
+    ros2 run nav_eval evaluate RUN_DIR [--sets ...] [--train-seeds 101-110]
+                                       [--heldout-seeds 201-210] [--no-record]
+
+Default sets, all on the same scenarios per split: the random policy on the training seeds
+(baseline), the final DQN on the training seeds and on the held-out seeds, and the early
+checkpoint (the first one after step 0) on both, for the early-vs-final comparison.  The DQN acts
+with ``predict(deterministic=True)``; the environment is built from the run's own
+``config.yaml`` (sim settings, action speeds, episode limit), so preprocessing and action timing
+are those of training.  Writes ``RUN_DIR/eval/``: ``results.json``, ``results.md``,
+``episodes.csv``, per-episode traces (``traces/<set>/seed_<n>.json`` + ``_frames.npz``) and one
+rosbag2/MCAP bag per set under ``bags/<set>/``.  The same evaluation twice gives identical files
+(wall-clock time is only printed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nav_eval import metrics
+from nav_eval.errors import EvaluationError
+from nav_eval.policies import DQNPolicy, Policy, RandomPolicy
+from nav_gym.cli import run_command, strip_ros_args
+from nav_gym.config import EnvConfig
+from nav_gym.env import NavigationEnv
+from nav_gym.train import checkpoints
+from nav_gym.train_config import TrainConfig, load_yaml
+from nav_sim.config import SimConfig, normalise_split
+
+TRAIN_SEEDS = tuple(range(101, 111))
+HELDOUT_SEEDS = tuple(range(201, 211))
+SET_LABELS = {
+    'random_train': 'Random policy, training seeds', 'dqn_train': 'DQN final, training seeds',
+    'dqn_heldout': 'DQN final, held-out seeds', 'early_train': 'DQN early, training seeds',
+    'early_heldout': 'DQN early, held-out seeds'}
+DEFAULT_SETS = tuple(SET_LABELS)
+MATCH_SETTLE_S = 1.0
+
+
+@dataclass(frozen=True)
+class EvalSet:
+    """A policy evaluated on one split's seeds."""
+
+    name: str
+    label: str
+    policy: str
+    checkpoint: str | None
+    split: str
+    seeds: tuple[int, ...]
+
+
+def parse_seeds(text: str) -> tuple[int, ...]:
+    """'101-110' or '101,105,107' (or a mix) -> a tuple of non-negative seeds."""
+    seeds: list[int] = []
+    try:
+        for part in text.split(','):
+            lo, _, hi = part.strip().partition('-')
+            seeds += list(range(int(lo), int(hi) + 1)) if hi else [int(lo)]
+    except ValueError:
+        raise EvaluationError(f"bad seed list {text!r}: use e.g. '101-110' or '101,102'") from None
+    if not seeds or min(seeds) < 0:
+        raise EvaluationError(f'bad seed list {text!r}: need at least one seed, all >= 0')
+    return tuple(seeds)
+
+
+def run_config(run_dir: Path) -> TrainConfig:
+    path = run_dir / 'config.yaml'
+    if not path.is_file():
+        raise EvaluationError(f'{run_dir} is not a training run directory (no config.yaml); '
+                              'train one with `ros2 run nav_gym train`')
+    return TrainConfig(**load_yaml(path))
+
+
+def early_checkpoint(run_dir: Path) -> str | None:
+    """The first checkpoint after step 0 (relative to the run directory), if any."""
+    found = [(s, p) for s, p in checkpoints(run_dir) if s > 0]
+    return str(found[0][1].relative_to(run_dir)) if found else None
+
+
+def plan_sets(run_dir: Path, names: list[str], train_seeds: tuple[int, ...],
+              heldout_seeds: tuple[int, ...], final: str = 'final_model.zip',
+              early: str | None = None) -> list[EvalSet]:
+    """The evaluation sets to run, in the order given; raises on unknown names."""
+    run_config(run_dir)  # a clear error first if this is not a run directory
+    unknown = [n for n in names if n not in SET_LABELS]
+    if unknown:
+        raise EvaluationError(f'unknown evaluation set(s) {unknown}; known: {list(SET_LABELS)}')
+    early = early or early_checkpoint(run_dir)
+    out = []
+    for name in names:
+        kind, split_name = name.split('_')
+        split = normalise_split(split_name)
+        seeds = train_seeds if split == 'train' else heldout_seeds
+        if kind == 'early' and early is None:
+            print(f'skipping {name}: the run has no checkpoint after step 0')
+            continue
+        checkpoint = {'random': None, 'dqn': final, 'early': early}[kind]
+        if checkpoint is not None and not (run_dir / checkpoint).is_file():
+            raise EvaluationError(f'{name}: checkpoint {run_dir / checkpoint} not found; '
+                                  'finish (or --resume) the training run first')
+        out.append(EvalSet(name, SET_LABELS[name], 'random' if kind == 'random' else 'dqn',
+                           checkpoint, split, seeds))
+    return out
+
+
+def run_episode(env: NavigationEnv, policy: Policy, seed: int, split: str,
+                recorder: Any = None) -> tuple[metrics.EpisodeResult, dict, np.ndarray]:
+    """One episode: returns its result, its per-step trace and its observations."""
+    obs, info = env.reset(seed=seed, options={'split': split})
+    if recorder is not None:
+        _recorded(recorder, env.last_stamp_ns)
+    policy.begin_episode(seed)
+    frames, steps = [obs], []
+    total, truncated, event = 0.0, False, 'none'
+    step_info: dict[str, Any] = {'distance': info['distance'], 'path_length': 0.0}
+    while True:
+        action, q_values = policy.act(obs)
+        obs, reward, terminated, truncated, step_info = env.step(action)
+        if recorder is not None:
+            _recorded(recorder, env.last_stamp_ns)
+        frames.append(obs)
+        total += reward
+        event = step_info['event']
+        steps.append({'step': step_info['step'], 'action': action,
+                      'action_name': step_info['action_name'], 'reward': round(reward, 6),
+                      'reward_terms': {k: round(v, 6) for k, v in
+                                       step_info['reward_terms'].items()},
+                      'distance': round(step_info['distance'], 6),
+                      'pose': [round(v, 6) for v in step_info['pose']], 'event': event,
+                      'q_values': q_values})
+        if terminated or truncated:
+            break
+    result = metrics.episode_result(
+        seed, split, event, truncated, len(steps), total, info['scenario']['initial_distance'],
+        step_info['distance'], step_info['path_length'])
+    trace = {'seed': seed, 'split': split, 'outcome': result.outcome,
+             'scenario': info['scenario'], 'steps': steps}
+    return result, trace, np.stack(frames)
+
+
+def _recorded(recorder: Any, stamp_ns: int, timeout: float = 5.0) -> None:
+    """Lockstep with the recorder: the sim publishes with depth 1, so wait until the period's
+    messages are in the bag before the next command; a loss is reported, never silent."""
+    from nav_eval.recording import PERIOD_TOPICS
+    if not recorder.wait_for(stamp_ns, timeout, PERIOD_TOPICS):
+        print(f'warning: the bag misses messages of the period stamped {stamp_ns} ns',
+              flush=True)
+
+
+def arena_description(sim_params: dict[str, Any]) -> dict[str, Any]:
+    """Arena geometry for top-down plots (loads the MJCF; renders nothing)."""
+    from nav_sim.world import World
+    names = {f for f in SimConfig.__dataclass_fields__}
+    config = SimConfig.from_dict({k: v for k, v in sim_params.items() if k in names})
+    world = World(config)
+    g = world.geometry
+    return {'half_size': g.half_size, 'robot_radius': g.robot_radius,
+            'goal_radius': config.goal_radius, 'goal_marker_radius': config.goal_marker_radius,
+            'shapes': [{'name': s.name, 'kind': s.kind, 'half_x': s.half_x, 'half_y': s.half_y}
+                       for s in g.shapes]}
+
+
+def evaluate_set(env: NavigationEnv, run_dir: Path, eval_set: EvalSet, out: Path,
+                 record: bool) -> dict[str, Any]:
+    """Run every seed of a set; write its traces (and bag); return its results entry."""
+    policy: Policy = (RandomPolicy() if eval_set.policy == 'random'
+                      else DQNPolicy(run_dir / str(eval_set.checkpoint)))
+    trace_dir = out / 'traces' / eval_set.name
+    trace_dir.mkdir(parents=True, exist_ok=True)
+    recorder = _open_recorder(out / 'bags' / eval_set.name, env) if record else None
+    results = []
+    try:
+        for seed in eval_set.seeds:
+            result, trace, frames = run_episode(env, policy, seed, eval_set.split, recorder)
+            results.append(result)
+            meta = {'set': eval_set.name, 'policy': eval_set.policy,
+                    'checkpoint': eval_set.checkpoint}
+            trace = {**meta, **trace}
+            (trace_dir / f'seed_{seed}.json').write_text(json.dumps(trace, indent=1))
+            np.savez_compressed(trace_dir / f'seed_{seed}_frames.npz', obs=frames)
+            if recorder is not None:
+                recorder.annotate({**meta, **result.to_dict()})
+            print(f'  {eval_set.name:<14} seed {seed:>4}: {result.outcome:<9} '
+                  f'{result.length:>4} steps  return {result.episode_return:+7.3f}  '
+                  f'SPL {result.spl:.3f}', flush=True)
+    finally:
+        if recorder is not None:
+            recorder.close()
+    summary = metrics.summarize(results)
+    return {'name': eval_set.name, 'label': eval_set.label, 'policy': eval_set.policy,
+            'checkpoint': eval_set.checkpoint, 'split': eval_set.split,
+            'seeds': list(eval_set.seeds), 'summary': summary.to_dict(),
+            'episodes': [r.to_dict() for r in results]}
+
+
+def _open_recorder(path: Path, env: NavigationEnv, timeout: float = 10.0) -> Any:
+    """A bag recorder on the env's sim, matched with it before the first reset is published."""
+    from nav_eval.recording import BagRecorder
+    if path.exists():
+        import shutil
+        shutil.rmtree(path)  # a re-run replaces the bag of the same set
+    path.parent.mkdir(parents=True, exist_ok=True)
+    recorder = BagRecorder(path, namespace=env.namespace)
+    node = env.client.node
+    topic = node.resolve_topic_name('camera/image_raw')
+    deadline = time.monotonic() + timeout
+    ready = recorder.wait_for_publishers(timeout)
+    while ready and node.count_subscribers(topic) < 2:  # the env's client and the recorder
+        if time.monotonic() > deadline:
+            ready = False
+            break
+        time.sleep(0.01)
+    if not ready:
+        recorder.close()
+        raise EvaluationError(f'the bag recorder could not connect to nav_sim in '
+                              f'{env.namespace} within {timeout} s')
+    # discovery can report the match ~0.4 s before the sim's publishers deliver to it
+    time.sleep(MATCH_SETTLE_S)
+    return recorder
+
+
+def env_for_run(config: TrainConfig, record: bool, sim: str = 'embedded') -> NavigationEnv:
+    """The training environment of a run (same sim settings and actions)."""
+    sim_params = dict(config.sim_params)
+    if record:
+        sim_params['publish_clock'] = True
+    return NavigationEnv(EnvConfig(sim=sim, sim_timeout=max(config.sim_timeout, 5.0),
+                                   max_episode_steps=config.max_episode_steps,
+                                   forward_speed=config.forward_speed,
+                                   turn_rate=config.turn_rate, sim_params=sim_params))
+
+
+def evaluate(run_dir: Path, sets: list[EvalSet], out: Path | None = None,
+             record: bool = True) -> dict[str, Any]:
+    """Evaluate every set and write results.json / results.md / episodes.csv under ``out``."""
+    config = run_config(run_dir)
+    out = out or run_dir / 'eval'
+    out.mkdir(parents=True, exist_ok=True)
+    env = env_for_run(config, record)
+    try:
+        entries = [evaluate_set(env, run_dir, s, out, record) for s in sets]
+    finally:
+        env.close()
+    results = {'run_dir': str(run_dir), 'arena': arena_description(config.sim_params),
+               'config': {'sim_params': config.sim_params,
+                          'forward_speed': config.forward_speed, 'turn_rate': config.turn_rate,
+                          'max_episode_steps': config.max_episode_steps},
+               'sets': entries}
+    (out / 'results.json').write_text(json.dumps(results, indent=1))
+    (out / 'results.md').write_text(results_markdown(entries))
+    (out / 'episodes.csv').write_text(metrics.episodes_csv(
+        (e['name'], [_episode(d) for d in e['episodes']]) for e in entries))
+    return results
+
+
+def _episode(d: dict[str, Any]) -> metrics.EpisodeResult:
+    values = dict(d)
+    values['episode_return'] = values.pop('return')
+    return metrics.EpisodeResult(**values)
+
+
+def results_markdown(entries: list[dict[str, Any]]) -> str:
+    rows = [metrics.summary_row(f"{e['label']} ({_seed_range(e['seeds'])})",
+                                metrics.SetSummary(**e['summary'])) for e in entries]
+    return metrics.markdown_table(metrics.TABLE_COLUMNS, rows) + '\n'
+
+
+def _seed_range(seeds: list[int]) -> str:
+    contiguous = seeds == list(range(seeds[0], seeds[0] + len(seeds)))
+    return f'{seeds[0]}–{seeds[-1]}' if contiguous and len(seeds) > 1 else ','.join(
+        map(str, seeds))
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('run_dir', type=Path, help='training run directory')
+    parser.add_argument('--sets', default=','.join(DEFAULT_SETS),
+                        help=f'comma-separated evaluation sets (default: all of {DEFAULT_SETS})')
+    parser.add_argument('--train-seeds', default='101-110')
+    parser.add_argument('--heldout-seeds', default='201-210')
+    parser.add_argument('--checkpoint', default='final_model.zip',
+                        help='final model, relative to the run directory')
+    parser.add_argument('--early-checkpoint', help='early checkpoint (default: the first '
+                        'after step 0)')
+    parser.add_argument('--out', type=Path, help='output directory (default RUN_DIR/eval)')
+    parser.add_argument('--no-record', action='store_true', help='do not write MCAP bags')
+    args, _ = parser.parse_known_args(strip_ros_args(argv))
+
+    def body() -> int:
+        sets = plan_sets(args.run_dir, [s for s in args.sets.split(',') if s],
+                         parse_seeds(args.train_seeds), parse_seeds(args.heldout_seeds),
+                         args.checkpoint, args.early_checkpoint)
+        start = time.perf_counter()
+        results = evaluate(args.run_dir, sets, args.out, record=not args.no_record)
+        print(results_markdown(results['sets']))
+        print(f'evaluated {sum(len(s.seeds) for s in sets)} episodes in '
+              f'{time.perf_counter() - start:.1f} s; results in '
+              f"{args.out or args.run_dir / 'eval'}")
+        return 0
+
+    run_command('nav-eval-evaluate', body)
+
+
+if __name__ == '__main__':
+    main()

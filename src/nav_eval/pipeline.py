@@ -1,0 +1,118 @@
+"""The main job: validate the environment -> train -> evaluate -> diagnose -> report.
+
+    visnav-pipeline [--config config/train.yaml] [--run-name NAME] [any nav-gym-train flag]
+    visnav-pipeline --resume runs/NAME      # finish an interrupted pipeline
+
+Everything lands in one run directory: ``validation.json``, the training files (see
+``nav_gym.train``), ``eval/`` (results, traces, MCAP bags, diagnosis) and ``report/Result.md`` +
+``Result.html``.  Training is not started if a validation check fails.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+from nav_eval import diagnose, evaluate, report
+from nav_eval.errors import DiagnosisError
+from nav_gym import train_config
+from nav_gym.checks import run_checklist
+from nav_gym.cli import run_command, strip_ros_args
+from nav_gym.config import EnvConfig
+from nav_gym.env import NavigationEnv
+from nav_gym.train import checkpoints, new_run_dir, train
+from nav_gym.train_config import TrainConfig
+from nav_gym.validate import format_checklist
+
+STAGES = ('validate the environment', 'train the DQN', 'evaluate on fixed seeds',
+          'diagnose a failed episode', 'write the report')
+EXPERIMENTS_LOG = Path('docs/experiments.md')
+
+
+def stage(number: int) -> None:
+    print(f'\n[{number}/{len(STAGES)}] {STAGES[number - 1]}', flush=True)
+
+
+def validate_run(config: TrainConfig, run_dir: Path) -> bool:
+    """The workshop's validation checklist on the run's environment; writes validation.json."""
+    env_config = EnvConfig(**{**asdict(config.env_config()), 'sim': 'embedded',
+                              'namespace': ''})
+    env = NavigationEnv(env_config)
+    try:
+        checks = run_checklist(env, lambda **kw: NavigationEnv(env_config, **kw))
+    finally:
+        env.close()
+    print(format_checklist(checks), flush=True)
+    (run_dir / 'validation.json').write_text(json.dumps([asdict(c) for c in checks], indent=1))
+    return all(c.passed for c in checks)
+
+
+def run_pipeline(config: TrainConfig, run_dir: Path, resume: bool,
+                 experiments: Path | None) -> int:
+    start = time.perf_counter()
+    stage(1)
+    if resume and (run_dir / 'validation.json').is_file():
+        print('already validated (validation.json)')
+    elif not validate_run(config, run_dir):
+        print('validation failed: fix the environment before training (see above)')
+        return 1
+    stage(2)
+    if (run_dir / 'final_model.zip').is_file():
+        print('already trained (final_model.zip)')
+    else:
+        summary = train(config, run_dir, resume=resume and bool(checkpoints(run_dir)))
+        print(f"trained {summary['num_timesteps']} steps in {summary['wall_clock_s']:.0f} s "
+              f"({summary['steps_per_s']} steps/s, env share {summary['env_share']:.1%})")
+        if summary['interrupted']:
+            print(f'continue with: visnav-pipeline --resume {run_dir}')
+            return 130
+    stage(3)
+    sets = evaluate.plan_sets(run_dir, list(evaluate.DEFAULT_SETS), evaluate.TRAIN_SEEDS,
+                              evaluate.HELDOUT_SEEDS)
+    results = evaluate.evaluate(run_dir, sets)
+    print(evaluate.results_markdown(results['sets']))
+    stage(4)
+    try:
+        diagnose.run(run_dir)
+    except DiagnosisError as exc:
+        print(f'no diagnosis: {exc}')
+    stage(5)
+    path = report.write_report(run_dir, experiments if experiments and experiments.is_file()
+                               else None)
+    print(f'report: {path} (and {path.with_suffix(".html")})')
+    print(f'pipeline finished in {time.perf_counter() - start:.0f} s; run directory {run_dir}')
+    return 0
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--config', help='YAML file with training settings '
+                        '(default: the workshop settings, see config/train.yaml)')
+    parser.add_argument('--resume', metavar='RUN_DIR', help='finish an interrupted pipeline')
+    parser.add_argument('--experiments', type=Path, default=EXPERIMENTS_LOG,
+                        help='Markdown log of task-design attempts to include in the report')
+    train_config.add_arguments(parser)
+    args, _ = parser.parse_known_args(strip_ros_args(argv))
+    overrides = {k: v for k, v in vars(args).items() if k in train_config.FIELDS}
+
+    def body() -> int:
+        if args.resume:
+            run_dir = Path(args.resume)
+            base = train_config.load_yaml(run_dir / 'config.yaml') \
+                if (run_dir / 'config.yaml').is_file() else {}
+            config = train_config.build(args.config, overrides, base)
+        else:
+            config = train_config.build(args.config, overrides)
+            run_dir = new_run_dir(config)
+            (run_dir / 'config.yaml').write_text(config.to_yaml())
+        print(f'run directory: {run_dir}', flush=True)
+        return run_pipeline(config, run_dir, bool(args.resume), args.experiments)
+
+    run_command('visnav-pipeline', body)
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,448 @@
+"""Record the nav_sim topics of one namespace into a rosbag2 bag (MCAP storage) with ``rosbags``.
+
+:class:`BagRecorder` subscribes (``raw=True``) to what ``nav_sim/sim_node`` publishes and what
+drives it, and writes the CDR bytes unchanged, each under its fully resolved topic name:
+
+    <ns>/camera/image_raw     sensor_msgs/msg/Image
+    <ns>/camera/camera_info   sensor_msgs/msg/CameraInfo
+    <ns>/odom                 nav_msgs/msg/Odometry
+    <ns>/goal_pose            geometry_msgs/msg/PoseStamped (transient local)
+    <ns>/episode_event        diagnostic_msgs/msg/DiagnosticArray
+    <ns>/cmd_vel              geometry_msgs/msg/Twist
+    /clock                    rosgraph_msgs/msg/Clock
+    /visnav/episode           std_msgs/msg/String (only written by :meth:`BagRecorder.annotate`)
+
+The bag is rosbag2 version 9 (what Jazzy writes); ``metadata.yaml`` appears when the recorder is
+closed.  Bag timestamps are sim time, so a recording of a seeded run is reproducible: the header
+stamp (the Clock's value on ``/clock``) of every stamped message; for ``cmd_vel``, which has no
+header, and for annotations, the newest sim stamp seen so far (in lockstep that is normally the
+stamp of the observation the command answers).  Unstamped messages that arrive before any sim
+stamp wait for the first one; if none comes within ``HOLD_S``, they (and later unstamped ones)
+get wall-clock time.  Timestamps never decrease within a topic, so record one sim run per bag:
+a restarted sim starts its clock again at zero.
+
+Connecting takes a moment: :meth:`BagRecorder.wait_for_publishers` says when the recorder has
+matched the sim's publishers, but the sim can match the recorder's subscriptions a few hundred
+milliseconds later, and what it publishes before then never reaches the bag.  Before a run that
+must be complete, reset and step until :meth:`BagRecorder.wait_for` sees a whole control period
+(``topics=PERIOD_TOPICS``).
+
+Finding episodes in a bag:
+
+* ``/visnav/episode``: one JSON annotation per finished episode (set, policy, checkpoint, seed,
+  split, outcome, length, return, ...), written by the evaluation at the stamp of the episode's
+  last frame; :func:`episodes_in_bag` returns them in order.  The always-absolute topic name keeps
+  them in one place whatever namespace the sim ran in.
+* ``<ns>/episode_event``: one DiagnosticArray per control period (status ``nav_sim/episode``, see
+  :mod:`nav_sim.ros_msgs`).  Its message is ``reset`` on an episode's first frame (key/values
+  ``episode``, ``seed``, ``split``), ``goal`` or ``collision`` on a terminal frame (``done`` is
+  True) and ``none`` otherwise.  Every message of one control period shares the stamp, so the
+  messages from one ``reset`` stamp up to (not including) the next belong to one episode;
+  :func:`episode_events` returns the parsed events.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+import struct
+import threading
+import time
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, Twist
+from nav_msgs.msg import Odometry
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile
+from rclpy.signals import SignalHandlerOptions
+from rclpy.subscription import Subscription
+from rosbags.interfaces import (
+    Connection,
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer, WriterError
+from rosbags.typesys import Stores, get_typestore
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import CameraInfo, Image
+
+from nav_eval.errors import NavEvalError
+from nav_sim import qos, ros_msgs
+
+_log = logging.getLogger(__name__)
+
+BAG_VERSION = 9            # the rosbag2 metadata version ROS 2 Jazzy writes
+QUEUE_DEPTH = 50           # subscriber queue: a briefly slow recorder loses nothing
+SPIN_TIMEOUT_S = 0.1       # how soon the recording thread notices close()
+DRAIN_S = 0.5              # at close, write what already arrived for at most this long
+HOLD_S = 10.0              # unstamped messages wait this long for a first sim stamp ...
+HOLD_MAX = 1000            # ... or until this many are waiting
+POLL_S = 0.02
+IMAGE_TOPIC = 'camera/image_raw'
+EPISODE_TOPIC = '/visnav/episode'
+STRING_TYPE = 'std_msgs/msg/String'
+
+
+class RecordingError(NavEvalError, RuntimeError):
+    """A bag cannot be written (target exists, writer failure) or the recording failed."""
+
+
+@dataclass(frozen=True)
+class RecordedTopic:
+    """One topic the recorder subscribes to."""
+
+    name: str             # relative to the namespace (absolute for /clock)
+    msgtype: str          # ROS 2 type name, as stored in the bag
+    msg_class: type       # rclpy message class to subscribe with
+    profile: QoSProfile   # what the publisher offers (nav_sim.qos); the recorder queues deeper
+    stamped: bool         # starts with a builtin_interfaces/Time (header stamp, Clock value)
+
+
+TOPICS = (
+    RecordedTopic(IMAGE_TOPIC, 'sensor_msgs/msg/Image', Image, qos.OBSERVATION, True),
+    RecordedTopic('camera/camera_info', 'sensor_msgs/msg/CameraInfo', CameraInfo,
+                  qos.OBSERVATION, True),
+    RecordedTopic('odom', 'nav_msgs/msg/Odometry', Odometry, qos.OBSERVATION, True),
+    RecordedTopic('goal_pose', 'geometry_msgs/msg/PoseStamped', PoseStamped, qos.LATCHED, True),
+    RecordedTopic('episode_event', 'diagnostic_msgs/msg/DiagnosticArray', DiagnosticArray,
+                  qos.OBSERVATION, True),
+    RecordedTopic('cmd_vel', 'geometry_msgs/msg/Twist', Twist, qos.CONTROL, False),
+    RecordedTopic('/clock', 'rosgraph_msgs/msg/Clock', Clock, qos.CLOCK, True),
+)
+#: what nav_sim publishes every control period (and ``/clock`` with ``publish_clock``)
+PERIOD_TOPICS = (IMAGE_TOPIC, 'camera/camera_info', 'odom', 'episode_event')
+#: topics every nav_sim node publishes
+SIM_TOPICS = (*PERIOD_TOPICS, 'goal_pose')
+
+_typestore = get_typestore(Stores.ROS2_JAZZY)
+
+
+def cdr_stamp_ns(data: bytes | memoryview) -> int | None:
+    """The builtin_interfaces/Time a CDR message starts with (header stamp, Clock), in ns.
+
+    Reads 8 bytes after the 4-byte encapsulation header instead of deserializing the message;
+    None if ``data`` is too short to hold one.
+    """
+    if len(data) < 12:
+        return None
+    sec, nanosec = struct.unpack_from('<iI' if data[1] & 1 else '>iI', data, 4)
+    return sec * 1_000_000_000 + nanosec
+
+
+def bag_qos(profile: QoSProfile) -> Qos:
+    """The rosbags form of an rclpy QoS profile (durations left at the default)."""
+    default = QosTime(0, 0)
+    return Qos(QosHistory(profile.history.value), profile.depth,
+               QosReliability(profile.reliability.value), QosDurability(profile.durability.value),
+               default, default, QosLiveliness(profile.liveliness.value), default, False)
+
+
+def _json_value(value: Any) -> Any:
+    """numpy scalars and arrays as plain Python values, for ``json.dumps``."""
+    for method in ('tolist', 'item'):
+        if hasattr(value, method):
+            return getattr(value, method)()
+    raise TypeError(f'{type(value).__name__} is not JSON serializable')
+
+
+class BagRecorder:
+    """Record the nav_sim topics of ``namespace`` into a new MCAP bag at ``path``.
+
+    Runs its own rclpy context and node, spun by a SingleThreadedExecutor in a daemon thread;
+    :meth:`close` (or leaving the ``with`` block) finishes the bag.
+    """
+
+    def __init__(self, path: str | Path, namespace: str = '', *,
+                 node_name: str = 'visnav_recorder', queue_depth: int = QUEUE_DEPTH) -> None:
+        self.path = Path(path)
+        self.namespace = '/' + namespace.strip('/') if namespace.strip('/') else ''
+        if self.path.exists():
+            raise RecordingError(f'{self.path} exists already; rosbag2 bags are never '
+                                 'overwritten: choose a new output directory or remove it')
+        self._cond = threading.Condition(threading.Lock())
+        self._counts: dict[str, int] = {}
+        self._last_ns: dict[int, int] = {}
+        self._sim_ns: int | None = None
+        self._ids: dict[str, int] = {}          # topic name as in TOPICS -> connection id
+        self._stamp_ns: dict[int, int] = {}     # connection id -> newest header stamp written
+        self._received = 0
+        self._held: list[tuple[Connection, bytes, int]] = []  # unstamped, before any sim stamp
+        self._wall_clock = False  # no sim stamp in time: unstamped messages get wall-clock time
+        self._failure: BaseException | None = None
+        self._closed = False
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._context: rclpy.Context | None = None
+        self._node: Node | None = None
+        self._executor: SingleThreadedExecutor | None = None
+        self._subscriptions: dict[str, Subscription] = {}
+        self._writer: Writer | None = None
+        try:
+            self._writer = Writer(self.path, version=BAG_VERSION,
+                                  storage_plugin=StoragePlugin.MCAP)
+            self._writer.open()
+        except (WriterError, OSError) as exc:
+            raise RecordingError(f'cannot create the bag {self.path}: {exc}') from exc
+        try:
+            self._start_node(node_name, queue_depth)
+        except BaseException:
+            self._abandon()
+            raise
+
+    # --- set-up ---------------------------------------------------------------------------
+    def _start_node(self, node_name: str, queue_depth: int) -> None:
+        self._context = rclpy.Context()
+        rclpy.init(context=self._context, signal_handler_options=SignalHandlerOptions.NO)
+        node = self._node = rclpy.create_node(node_name, namespace=self.namespace or '/',
+                                              context=self._context,
+                                              start_parameter_services=False, enable_rosout=False)
+        for topic in TOPICS:
+            connection = self._add_connection(node.resolve_topic_name(topic.name),
+                                              topic.msgtype, [bag_qos(topic.profile)])
+            profile = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=queue_depth,
+                                 reliability=topic.profile.reliability,
+                                 durability=topic.profile.durability)
+            self._subscriptions[topic.name] = node.create_subscription(
+                topic.msg_class, topic.name, partial(self._on_raw, connection, topic.stamped),
+                profile, raw=True)
+            self._ids[topic.name] = connection.id
+        self._episode_connection = self._add_connection(EPISODE_TOPIC, STRING_TYPE, [])
+        self._executor = SingleThreadedExecutor(context=self._context)
+        self._executor.add_node(node)
+        self._thread = threading.Thread(target=self._spin, name='bag_recorder', daemon=True)
+        self._thread.start()
+
+    def _add_connection(self, topic: str, msgtype: str, profiles: list[Qos]) -> Connection:
+        assert self._writer is not None
+        connection = self._writer.add_connection(topic, msgtype, typestore=_typestore,
+                                                 offered_qos_profiles=profiles)
+        self._counts[topic] = 0
+        return connection
+
+    def _abandon(self) -> None:
+        """Undo a failed construction: stop ROS and remove the bag directory it created."""
+        self._stop_node()
+        writer, self._writer = self._writer, None
+        if writer is not None:
+            writer.abort()
+        shutil.rmtree(self.path, ignore_errors=True)
+        self._closed = True
+
+    # --- the recording thread -------------------------------------------------------------
+    def _on_raw(self, connection: Connection, stamped: bool, data: bytes) -> None:
+        self._received += 1
+        self._write(connection, data, cdr_stamp_ns(data) if stamped else None)
+
+    def _spin(self) -> None:
+        try:
+            while not self._stop.is_set():
+                self._executor.spin_once(timeout_sec=SPIN_TIMEOUT_S)
+            deadline = time.monotonic() + DRAIN_S
+            while time.monotonic() < deadline:
+                before = self._received
+                self._executor.spin_once(timeout_sec=0.0)
+                if self._received == before:
+                    break
+        except Exception as exc:  # a failed write ends the recording; close() reports it
+            _log.exception('bag recording of %s failed', self.path)
+            with self._cond:
+                self._failure = exc
+                self._cond.notify_all()
+
+    def _write(self, connection: Connection, data: bytes | memoryview,
+               stamp_ns: int | None) -> None:
+        """Write one message at its sim stamp, or the newest sim stamp if it has none.
+
+        Unstamped messages that come before any sim stamp wait for the first one (for at most
+        ``HOLD_S`` or ``HOLD_MAX`` messages; after that, unstamped ones get wall-clock time).
+        """
+        with self._cond:
+            if self._writer is None:
+                return
+            if stamp_ns is None:
+                if self._sim_ns is None and not self._wall_clock:
+                    self._hold(connection, data)
+                    return
+                self._put(connection, time.time_ns() if self._wall_clock else self._sim_ns,
+                          data)
+                return
+            if self._sim_ns is None:
+                self._sim_ns = stamp_ns
+                self._release_held(stamp_ns)
+            self._sim_ns = max(self._sim_ns, stamp_ns)
+            self._put(connection, stamp_ns, data)
+            self._stamp_ns[connection.id] = max(stamp_ns, self._stamp_ns.get(connection.id, 0))
+            self._cond.notify_all()
+
+    def _put(self, connection: Connection, when: int, data: bytes | memoryview) -> None:
+        assert self._writer is not None
+        when = max(when, self._last_ns.get(connection.id, 0))  # monotonic per topic
+        self._writer.write(connection, when, data)
+        self._last_ns[connection.id] = when
+        self._counts[connection.topic] += 1
+
+    def _hold(self, connection: Connection, data: bytes | memoryview) -> None:
+        self._held.append((connection, bytes(data), time.time_ns()))
+        if (len(self._held) >= HOLD_MAX
+                or self._held[-1][2] - self._held[0][2] > HOLD_S * 1_000_000_000):
+            self._wall_clock = True
+            self._release_held(None)
+
+    def _release_held(self, stamp_ns: int | None) -> None:
+        """Write the held messages at ``stamp_ns``, or at their arrival times if None."""
+        for connection, data, wall_ns in self._held:
+            self._put(connection, wall_ns if stamp_ns is None else stamp_ns, data)
+        self._held.clear()
+
+    # --- public API -----------------------------------------------------------------------
+    @property
+    def counts(self) -> dict[str, int]:
+        """Messages written so far per resolved topic name (annotations included)."""
+        with self._cond:
+            return dict(self._counts)
+
+    def wait_for_publishers(self, timeout: float, topics: Iterable[str] = SIM_TOPICS) -> bool:
+        """Block until each of ``topics`` (names as in :data:`TOPICS`) has a matched publisher.
+
+        Call it before driving the sim, so the first messages are not sent before the recorder
+        is connected.  Returns False after ``timeout`` seconds.
+        """
+        subscriptions = [self._subscriptions[name] for name in self._known(topics)]
+        deadline = time.monotonic() + timeout
+        while not all(sub.get_publisher_count() > 0 for sub in subscriptions):
+            if time.monotonic() >= deadline:
+                return False
+            time.sleep(POLL_S)
+        return True
+
+    def wait_for(self, stamp_ns: int, timeout: float,
+                 topics: Iterable[str] = (IMAGE_TOPIC,)) -> bool:
+        """Block until an image (each of ``topics``) stamped ``stamp_ns`` or later is written.
+
+        Returns False after ``timeout`` seconds.  Lockstep callers wait for each step's frame so
+        the sim's depth-1 publishers never outrun the recorder.  Waiting for a reset frame on
+        every stamped topic confirms that the sim, too, has matched the recorder: it can do so
+        a few hundred milliseconds after :meth:`wait_for_publishers` returns, and what it
+        publishes before then never reaches the bag.
+        """
+        ids = [self._ids[name] for name in self._known(topics)]
+        if self._ids['cmd_vel'] in ids:
+            raise ValueError('cmd_vel has no stamp to wait for')
+
+        def arrived() -> bool:
+            return all(self._stamp_ns.get(i, -1) >= stamp_ns for i in ids)
+
+        with self._cond:
+            self._cond.wait_for(lambda: arrived() or self._failure is not None
+                                or self._writer is None, timeout)
+            if self._failure is not None:
+                raise RecordingError(f'recording into {self.path} failed: {self._failure}')
+            return arrived()
+
+    def annotate(self, info: Mapping[str, Any]) -> None:
+        """Write ``json.dumps(info)`` as a std_msgs/String on ``/visnav/episode``.
+
+        It goes at the newest sim stamp seen, so an annotation made at an episode's end
+        carries the stamp of the episode's last frame.
+        """
+        text = json.dumps(dict(info), default=_json_value)
+        data = _typestore.serialize_cdr(_typestore.types[STRING_TYPE](data=text), STRING_TYPE)
+        with self._cond:
+            if self._writer is None:
+                raise RecordingError(f'cannot annotate {self.path}: the recorder is closed')
+        self._write(self._episode_connection, data, None)
+
+    def _known(self, topics: Iterable[str]) -> tuple[str, ...]:
+        topics = tuple(topics)
+        unknown = sorted(set(topics) - set(self._ids))
+        if unknown:
+            raise ValueError(f'not recorded: {unknown}; choose from {list(self._ids)}')
+        return topics
+
+    def _stop_node(self) -> None:
+        """Stop and join the thread, then destroy the node and the context (in that order)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+        if self._executor is not None:
+            self._executor.shutdown(timeout_sec=1.0)
+        if self._node is not None:
+            self._node.destroy_node()
+        if self._context is not None:
+            self._context.try_shutdown()
+
+    def close(self) -> None:
+        """Finish the recording and write ``metadata.yaml``; safe to call more than once."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop_node()
+        with self._cond:
+            self._release_held(None)
+            writer, self._writer = self._writer, None
+            self._cond.notify_all()
+        if writer is not None:
+            writer.close()
+        if self._failure is not None:
+            raise RecordingError(f'recording into {self.path} failed: {self._failure}; '
+                                 'the bag holds what was written before') from self._failure
+
+    def __enter__(self) -> BagRecorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+# --- reading ------------------------------------------------------------------------------
+def read_bag(path: str | Path, topics: Iterable[str] | None = None
+             ) -> dict[str, list[tuple[int, Any]]]:
+    """Every message of a bag (or of ``topics``) as (timestamp_ns, message) lists per topic.
+
+    Messages are rosbags dataclasses with the field names of the ROS 2 messages.
+    """
+    wanted = None if topics is None else set(topics)
+    with Reader(path) as reader:
+        connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
+        out: dict[str, list[tuple[int, Any]]] = {c.topic: [] for c in connections}
+        for connection, timestamp, raw in (reader.messages(connections=connections)
+                                           if connections else ()):
+            out[connection.topic].append(
+                (timestamp, _typestore.deserialize_cdr(raw, connection.msgtype)))
+    return out
+
+
+def episodes_in_bag(path: str | Path) -> list[dict[str, Any]]:
+    """The ``/visnav/episode`` annotations of a bag, parsed from JSON, in recording order."""
+    messages = read_bag(path, [EPISODE_TOPIC]).get(EPISODE_TOPIC, [])
+    return [json.loads(msg.data) for _, msg in messages]
+
+
+def episode_events(path: str | Path) -> list[tuple[int, dict[str, Any]]]:
+    """(timestamp_ns, event dict) of every ``*/episode_event`` message, in time order.
+
+    The dicts are :func:`nav_sim.ros_msgs.parse_event`'s: ``event`` (``reset``, ``none``,
+    ``goal``, ``collision``) plus ``topic`` and the counters (``episode``, ``seed``, ...).
+    """
+    with Reader(path) as reader:
+        topics = [c.topic for c in reader.connections if c.topic.endswith('/episode_event')]
+    events = []
+    for topic, messages in read_bag(path, topics).items():
+        for timestamp, msg in messages:
+            event = ros_msgs.parse_event(msg)
+            if event is not None:
+                events.append((timestamp, {**event, 'topic': topic}))
+    events.sort(key=lambda item: item[0])
+    return events

@@ -1,0 +1,541 @@
+"""Write a run's result report (Markdown + self-contained HTML) with its figures.
+
+    nav-eval-report RUN_DIR [--experiments docs/experiments.md]
+    ros2 run nav_eval report RUN_DIR
+
+Reads what the other commands left in RUN_DIR (validation.json, summary.json, monitor.csv,
+checkpoints/, eval/results.json, eval/traces/, eval/diagnosis.*) and writes
+RUN_DIR/report/Result.md, RUN_DIR/report/Result.html and RUN_DIR/report/figures/*.png.  Every
+section is written; one whose input is missing says which command produces it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import html
+import json
+import os
+import re
+import shutil
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from nav_eval import plots
+from nav_eval.errors import NavEvalError
+from nav_gym.cli import run_command, strip_ros_args
+
+SECTIONS = ('1. Observation and action checks', '2. Training',
+            '3. Early vs final checkpoint comparison', '4. Evaluation',
+            '5. Representative trajectories', '6. Failure diagnosis',
+            '7. Attempts and targeted improvements', '8. Reproduce')
+RUN_MARKERS = ('summary.json', 'config.yaml', 'monitor.csv')
+HYPERPARAMETERS = ('learning_rate', 'buffer_size', 'learning_starts', 'batch_size', 'gamma',
+                   'train_freq', 'gradient_steps', 'target_update_interval',
+                   'exploration_fraction', 'exploration_initial_eps', 'exploration_final_eps',
+                   'seed', 'split', 'max_episode_steps', 'forward_speed', 'turn_rate',
+                   'sim_params')
+EVAL_COLUMNS = ('Set', 'Policy', 'Split', 'Episodes', 'Success rate', 'Collision rate',
+                'Timeout rate', 'Mean length', 'Mean SPL', 'Mean return')
+IMAGE_RE = re.compile(r'!\[([^\]]*)\]\(([^)\s]+)\)')
+
+
+class ReportError(NavEvalError, RuntimeError):
+    """The report cannot be written (e.g. the directory is not a run directory)."""
+
+
+@dataclass
+class Run:
+    """A run directory's inputs, each None when missing or unreadable (``problems`` says)."""
+
+    path: Path
+    figures: Path
+    shown: str
+    summary: dict[str, Any] | None = None
+    config: dict[str, Any] | None = None
+    validation: list[dict[str, Any]] | None = None
+    results: dict[str, Any] | None = None
+    diagnosis: dict[str, Any] | None = None
+    problems: list[str] = field(default_factory=list)
+
+    def read(self, relative: str) -> Any:
+        path = self.path / relative
+        if not path.is_file():
+            return None
+        try:
+            text = path.read_text()
+            return yaml.safe_load(text) if path.suffix == '.yaml' else json.loads(text)
+        except (OSError, ValueError, yaml.YAMLError) as exc:
+            self.problems.append(f'`{relative}` could not be read ({type(exc).__name__}: {exc})')
+            return None
+
+    def sets(self) -> list[dict[str, Any]]:
+        return list((self.results or {}).get('sets', []))
+
+    def figure(self, name: str) -> tuple[Path, str]:
+        """Where a figure is written and how Result.md refers to it."""
+        return self.figures / name, f'figures/{name}'
+
+
+def load_run(run_dir: Path) -> Run:
+    run_dir = Path(run_dir)
+    if not run_dir.is_dir() or not any((run_dir / m).is_file() for m in RUN_MARKERS):
+        raise ReportError(f'{run_dir} is not a run directory (it has none of '
+                          f'{", ".join(RUN_MARKERS)}); pass the directory nav-gym-train created, '
+                          'e.g. runs/dqn_20261122_101500')
+    run = Run(run_dir, run_dir / 'report' / 'figures',
+              display_path(run_dir, f'runs/{run_dir.resolve().name}'))
+    run.summary = run.read('summary.json')
+    run.config = (run.summary or {}).get('config') or run.read('config.yaml')
+    run.validation = run.read('validation.json')
+    run.results = run.read('eval/results.json')
+    run.diagnosis = run.read('eval/diagnosis.json')
+    return run
+
+
+def display_path(path: Path, fallback: str | None = None) -> str:
+    """A path as the report shows it: as given when relative, else relative to the working
+    directory when inside it, else ``fallback`` (no machine-specific paths when avoidable)."""
+    path = Path(path)
+    if not path.is_absolute():
+        return path.as_posix()
+    relative = os.path.relpath(path, Path.cwd())
+    return relative if not relative.startswith('..') else (fallback or path.as_posix())
+
+
+# --- formatting ---------------------------------------------------------------------------------
+
+def cell(value: Any) -> str:
+    """A table cell: one line, pipes escaped."""
+    text = '–' if value is None else str(value)
+    return ' '.join(text.split()).replace('|', '\\|')
+
+
+def table(header: list[str] | tuple[str, ...], rows: list[list[Any]]) -> list[str]:
+    lines = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
+    return lines + ['| ' + ' | '.join(cell(v) for v in row) + ' |' for row in rows] + ['']
+
+
+def pct(value: Any, digits: int = 0) -> str:
+    return '–' if value is None else f'{100 * float(value):.{digits}f}%'
+
+
+def num(value: Any, digits: int = 2) -> str:
+    return '–' if value is None else f'{float(value):.{digits}f}'
+
+
+def duration(seconds: Any) -> str:
+    if seconds is None:
+        return '–'
+    minutes, secs = divmod(int(round(float(seconds))), 60)
+    hours, minutes = divmod(minutes, 60)
+    text = f'{hours} h {minutes:02d} min' if hours else f'{minutes} min {secs:02d} s'
+    return f'{text} ({float(seconds):,.0f} s)'
+
+
+def missing(what: str, command: str) -> list[str]:
+    return [f'> **Missing:** {what}. Produce it with `{command}`.', '']
+
+
+def details(summary: str, body: list[str]) -> list[str]:
+    """A collapsed block with Markdown inside (a blank line after the summary)."""
+    return [f'<details><summary>{summary}</summary>', '', *body, '</details>', '']
+
+
+def image(path: str, caption: str) -> list[str]:
+    return [f'![{caption}]({path})', '', f'*{caption}*', '']
+
+
+# --- sections -----------------------------------------------------------------------------------
+
+def section_checks(run: Run) -> list[str]:
+    if not run.validation:
+        return missing('`validation.json` (the environment validation checklist)',
+                       f'nav-gym-validate --json {run.shown}/validation.json')
+    rows = [[c.get('name'), c.get('expected'), c.get('measured'),
+             'pass' if c.get('passed') else '**FAIL**'] for c in run.validation]
+    failed = sum(not c.get('passed') for c in run.validation)
+    names = ' '.join(str(c.get('name')) for c in run.validation)
+    lines = [f'{len(rows) - failed} of {len(rows)} checks passed (from `validation.json`, '
+             'measured on the running environment by `nav-gym-validate`).', '']
+    if 'check_env' not in names:
+        lines += ['> **Missing:** no `check_env()` row in `validation.json`.', '']
+    return lines + table(['Check', 'Expected', 'Measured', 'Result'], rows)
+
+
+def section_training(run: Run) -> list[str]:
+    lines: list[str] = []
+    summary, config = run.summary or {}, run.config or {}
+    if not run.summary:
+        lines += missing('`summary.json` (wall-clock time, steps/s)', 'nav-gym-train')
+    else:
+        sessions = summary.get('sessions') or [summary]
+        rows = [['Environment steps', f"{summary.get('num_timesteps', 0):,} of "
+                 f"{summary.get('total_timesteps', 0):,}"],
+                ['Wall-clock time', duration(summary.get('wall_clock_total_s',
+                                                         summary.get('wall_clock_s')))],
+                ['Steps per second (last session)', num(summary.get('steps_per_s'), 1)],
+                ['Environment share of the time', f"{pct(summary.get('env_share'), 1)} "
+                 f"({num(summary.get('env_time_s'), 0)} s in the environment)"],
+                ['Episodes (last session)', summary.get('episodes')],
+                ['Sessions', f"{len(sessions)} (interrupted: "
+                 f"{'yes' if summary.get('interrupted') else 'no'})"]]
+        lines += ['**Training information**', ''] + table(['Item', 'Value'], rows)
+    if config:
+        rows = [[key, json.dumps(config[key]) if isinstance(config[key], dict) else config[key]]
+                for key in HYPERPARAMETERS if key in config]
+        lines += ['**Hyperparameters** (DQN `CnnPolicy`)', ''] + table(['Setting', 'Value'], rows)
+    if not (run.path / 'monitor.csv').is_file():
+        return lines + missing('`monitor.csv` (episode returns and lengths)', 'nav-gym-train')
+    data = plots.read_monitor(run.path / 'monitor.csv')
+    out, ref = run.figure('training_curves.png')
+    plots.training_curves(run.path, out)
+    ckpts = ', '.join(f'{s:,}' for s in plots.checkpoint_steps(run.path)) or 'none'
+    lines += image(ref, 'Training curves: episode return, length and success/collision rate vs '
+                   'environment interactions; dashed lines mark checkpoints')
+    count = len(data['r'])
+    total = int(data['steps'][-1]) if count else 0
+    lines += [f'`monitor.csv` holds {count} episodes over {total:,} environment steps; '
+              f'checkpoints at steps: {ckpts}.']
+    if count:
+        tail = slice(-plots.smoothing_window(count), None)
+        rate = (f", success rate {pct(np.mean(data['is_success'][tail]))}"
+                if 'is_success' in data else '')
+        lines += [f"Last {len(data['r'][tail])} episodes: mean return "
+                  f"{np.mean(data['r'][tail]):.2f}, mean length {np.mean(data['l'][tail]):.1f}"
+                  f'{rate}.']
+    return lines + ['']
+
+
+def checkpoint_name(entry: dict[str, Any]) -> str:
+    if entry.get('policy') != 'dqn':
+        return 'random policy'
+    name = Path(str(entry.get('checkpoint') or 'final_model.zip')).name
+    match = plots.CHECKPOINT_RE.search(name)
+    return f'{name} ({int(match.group(1)):,} steps)' if match else name
+
+
+def summary_row(entry: dict[str, Any]) -> list[Any]:
+    s = entry.get('summary', {})
+    return [entry.get('label') or entry.get('name'), checkpoint_name(entry), entry.get('split'),
+            s.get('episodes'), pct(s.get('success_rate')), pct(s.get('collision_rate')),
+            pct(s.get('timeout_rate')), num(s.get('mean_length'), 1),
+            num(s.get('mean_spl'), 3), num(s.get('mean_return'), 3)]
+
+
+def final_set(run: Run, split: str, seeds: list[int] | None = None) -> dict[str, Any] | None:
+    """The final DQN set on a split; the one named ``dqn_<split>`` or with the same seeds first."""
+    found = [s for s in run.sets() if s.get('policy') == 'dqn' and s.get('split') == split
+             and not str(s.get('name', '')).startswith('early_')]
+    found.sort(key=lambda s: (sorted(s.get('seeds', [])) != sorted(seeds or []),
+                              s.get('name') != f'dqn_{split}'))
+    return found[0] if found else None
+
+
+def section_early(run: Run) -> list[str]:
+    early = [s for s in run.sets() if str(s.get('name', '')).startswith('early_')]
+    if not early:
+        return missing('an `early_*` set in `eval/results.json` (an early checkpoint evaluated on '
+                       'the same seeds as the final model)', f'nav-eval-evaluate {run.shown}')
+    rows, lines = [], []
+    for entry in early:
+        final = final_set(run, entry.get('split'), entry.get('seeds'))
+        rows.append(summary_row(entry))
+        if final is None:
+            lines.append(f"No final DQN set on the {entry.get('split')} split to compare "
+                         f"`{entry.get('name')}` with.")
+            continue
+        rows.append(summary_row(final))
+        same = sorted(entry.get('seeds', [])) == sorted(final.get('seeds', []))
+        lines.append(f"{entry.get('split')} split: success rate "
+                     f"{pct(entry['summary'].get('success_rate'))} with "
+                     f"{checkpoint_name(entry)} vs {pct(final['summary'].get('success_rate'))} "
+                     f"with {checkpoint_name(final)}"
+                     f"{' on the same seeds' if same else ' (DIFFERENT seeds: not like for like)'}"
+                     '.')
+        outcomes = {e['seed']: [e.get('outcome')] for e in entry.get('episodes', [])}
+        for e in final.get('episodes', []):
+            outcomes.setdefault(e['seed'], ['–']).append(e.get('outcome'))
+        rows_by_seed = [[seed, *o, '–'][:3] for seed, o in sorted(outcomes.items())]
+        lines += [''] + details(f"Per-seed outcomes: {entry.get('name')} vs {final.get('name')}",
+                                table(['Seed', 'Early', 'Final'], rows_by_seed))
+    return table(EVAL_COLUMNS, rows) + lines + ['']
+
+
+def section_evaluation(run: Run) -> list[str]:
+    if not run.sets():
+        return missing('`eval/results.json` (deterministic evaluation)',
+                       f'nav-eval-evaluate {run.shown}')
+    lines = ['Deterministic evaluation (`deterministic=True`) on fixed seeds. SPL: success '
+             'weighted by (straight-line distance / path length).', '']
+    lines += table(EVAL_COLUMNS, [summary_row(s) for s in run.sets()])
+    needed = [('random policy on training seeds', [s for s in run.sets()
+                                                   if s.get('policy') == 'random'
+                                                   and s.get('split') == 'train']),
+              ('final DQN on training seeds', final_set(run, 'train')),
+              ('final DQN on held-out seeds', final_set(run, 'heldout'))]
+    for what, present in needed:
+        if not present:
+            lines += [f'> **Missing:** {what}. Produce it with `nav-eval-evaluate {run.shown}`.',
+                      '']
+    header = ['Seed', 'Outcome', 'Length', 'Return', 'Initial distance (m)',
+              'Final distance (m)', 'Path length (m)', 'SPL']
+    for entry in run.sets():
+        rows = [[e.get('seed'), e.get('outcome'), e.get('length'), num(e.get('return')),
+                 num(e.get('initial_distance')), num(e.get('final_distance')),
+                 num(e.get('path_length')), num(e.get('spl'))] for e in entry.get('episodes', [])]
+        lines += details(f"Episodes of {entry.get('label') or entry.get('name')} ({len(rows)})",
+                         table(header, rows))
+    return lines
+
+
+def load_traces(run: Run, set_name: str) -> list[tuple[Path, dict[str, Any]]]:
+    """The traces of one evaluated set, by seed."""
+    found = []
+    for path in (run.path / 'eval' / 'traces' / set_name).glob('seed_*.json'):
+        trace = run.read(str(path.relative_to(run.path)))
+        if isinstance(trace, dict) and 'scenario' in trace:
+            found.append((path, trace))
+    return sorted(found, key=lambda item: item[1].get('seed', 0))
+
+
+def dqn_sets_for_examples(run: Run) -> list[dict[str, Any]]:
+    return [s for s in (final_set(run, 'heldout'), final_set(run, 'train')) if s]
+
+
+def pick_examples(run: Run) -> tuple[Any, Any]:
+    """(successful, failed) (path, trace) pairs of the final DQN; the failure is the diagnosed
+    episode when its trace exists."""
+    traces = [t for s in dqn_sets_for_examples(run) for t in load_traces(run, s['name'])]
+    success = next((t for t in traces if t[1].get('outcome') == 'success'), None)
+    diagnosis = run.diagnosis or {}
+    failures = [t for t in traces if t[1].get('outcome') != 'success']
+    failed = next((t for t in failures if t[1].get('set') == diagnosis.get('set')
+                   and t[1].get('seed') == diagnosis.get('seed')), None)
+    return success, failed or (failures[0] if failures else None)
+
+
+def section_trajectories(run: Run) -> list[str]:
+    arena = (run.results or {}).get('arena')
+    sets = dqn_sets_for_examples(run)
+    grid = [t for _, t in load_traces(run, sets[0]['name'])] if sets else []
+    if not arena or not grid:
+        return missing('traces of the final DQN under `eval/traces/`',
+                       f'nav-eval-evaluate {run.shown}')
+    name = sets[0].get('label') or sets[0]['name']
+    out, ref = run.figure('trajectory_grid.png')
+    plots.trajectory_grid(grid, arena, out, title=f'{name}: first {min(len(grid), 10)} episodes')
+    lines = image(ref, f'{name}: top-down paths (orange-red: obstacles, green: goal with the '
+                  'dashed success radius, blue arrow: start pose, ring: final pose)')
+    success, failed = pick_examples(run)
+    for kind, example in (('success', success), ('failure', failed)):
+        if example is None:
+            lines += [f'No {kind} among the traced final-DQN episodes.', '']
+            continue
+        trace = example[1]
+        out, ref = run.figure(f'trajectory_{kind}.png')
+        plots.trajectory(trace, arena, out)
+        lines += image(ref, f"{kind.capitalize()}: {trace.get('set')} seed {trace.get('seed')} "
+                       f"({trace.get('outcome')}, {len(trace.get('steps', []))} steps)")
+    # the diagnosis already shows the failure's frames: then show the success's
+    order = (success, failed) if (run.diagnosis or {}).get('figures') else (failed, success)
+    for path, trace in (e for e in order if e):
+        frames_file = path.with_name(f'{path.stem}_frames.npz')
+        if not frames_file.is_file():
+            continue
+        with np.load(frames_file) as archive:
+            frames = archive['obs']
+        out, ref = run.figure('contact_sheet.png')
+        caption = (f"Policy observations (3x84x84) of {trace.get('set')} seed "
+                   f"{trace.get('seed')} ({trace.get('outcome')}); each frame is labelled with "
+                   'the step and action that produced it')
+        plots.contact_sheet(frames, out, labels=plots.frame_labels(trace.get('steps', [])),
+                            title=caption)
+        return lines + image(ref, caption)
+    return lines + missing('camera frames (`seed_<seed>_frames.npz`) of the shown episodes',
+                           f'nav-eval-evaluate {run.shown}')
+
+
+def include_markdown(run: Run, source: Path, prefix: str) -> list[str]:
+    """A Markdown file verbatim; its relative images are copied next to the report."""
+    def relink(match: re.Match[str]) -> str:
+        target = match.group(2)
+        for base in (source.parent, run.path):
+            found = base / target
+            if not re.match(r'[a-z]+:', target) and found.is_file():
+                name = found.name if found.name.startswith(prefix) else f'{prefix}_{found.name}'
+                out, ref = run.figure(name)
+                shutil.copyfile(found, out)
+                return f'![{match.group(1)}]({ref})'
+        return match.group(0)
+    return [IMAGE_RE.sub(relink, source.read_text()).rstrip(), '']
+
+
+def section_diagnosis(run: Run) -> list[str]:
+    source = run.path / 'eval' / 'diagnosis.md'
+    diagnosis = run.diagnosis or {}
+    if not source.is_file() and not diagnosis:
+        return missing('a failure diagnosis (`eval/diagnosis.md`)',
+                       f'nav-eval-diagnose {run.shown}')
+    if source.is_file():
+        lines = include_markdown(run, source, 'diagnosis')
+    else:
+        lines = [f"{diagnosis.get('summary', '')}", ''] + table(
+            ['Layer', 'Status', 'Evidence'],
+            [[layer.get('layer'), layer.get('status'), '; '.join(layer.get('evidence', []))]
+             for layer in diagnosis.get('layers', [])])
+    shown = '\n'.join(lines)
+    for figure in diagnosis.get('figures', []):
+        found = run.path / figure
+        name = found.name if found.name.startswith('diagnosis') else f'diagnosis_{found.name}'
+        if not found.is_file():
+            lines += [f'> **Missing:** figure `{figure}` named by `eval/diagnosis.json`.', '']
+        elif f'figures/{name})' not in shown:
+            out, ref = run.figure(name)
+            shutil.copyfile(found, out)
+            lines += image(ref, f'Diagnosis evidence: {figure}')
+    return lines
+
+
+def section_experiments(run: Run, experiments: Path | None) -> list[str]:
+    if experiments is None:
+        return missing('the experiments log (attempts and targeted improvements)',
+                       f'nav-eval-report {run.shown} --experiments docs/experiments.md')
+    if not Path(experiments).is_file():
+        return [f'> **Missing:** the experiments log `{experiments}` does not exist.', '']
+    return include_markdown(run, Path(experiments), 'experiments')
+
+
+def default_commands(run: Run, experiments: Path | None = None) -> list[str]:
+    name = Path(run.shown).name
+    log = f' --experiments {display_path(experiments)}' if experiments else ''
+    return [f'nav-gym-validate --json {run.shown}/validation.json',
+            f'nav-gym-train --config {run.shown}/config.yaml --run-name {name}_again',
+            f'nav-eval-evaluate {run.shown}',
+            f'nav-eval-diagnose {run.shown}',
+            f'nav-eval-report {run.shown}{log}',
+            '# or every stage in one command (ros2 run equivalents: nav_gym train, ...):',
+            f'visnav-pipeline --config {run.shown}/config.yaml --run-name {name}_again']
+
+
+def evidence(run: Run, experiments: Path | None) -> list[str]:
+    """The workshop's evidence checklist, with where each item is and whether it is there."""
+    names = ' '.join(str(c.get('name')) for c in run.validation or [])
+    diagnosed = (run.path / 'eval' / 'diagnosis.md').is_file() or bool(run.diagnosis)
+    items = [('Observation shape, dtype, min/max checks', 1, 'Observation' in names),
+             ('Action-space verification', 1, 'Action space' in names),
+             ('`check_env()` result', 1, 'check_env' in names),
+             ('Training curves (return, length)', 2, (run.path / 'monitor.csv').is_file()),
+             ('Training wall-clock time and information', 2, bool(run.summary)),
+             ('Early and final checkpoint comparison', 3,
+              any(str(s.get('name')).startswith('early_') for s in run.sets())),
+             ('Evaluation table: random, DQN train, DQN held-out', 4,
+              bool(final_set(run, 'train') and final_set(run, 'heldout'))),
+             ('Representative trajectories', 5, bool(dqn_sets_for_examples(run))),
+             ('One failed DQN episode with a diagnosis', 6, diagnosed),
+             ('One targeted improvement and justification', 7,
+              bool(experiments and Path(experiments).is_file()))]
+    return table(['Evidence', 'Section', 'Status'],
+                 [[what, SECTIONS[n - 1], 'present' if ok else '**MISSING**']
+                  for what, n, ok in items])
+
+
+def build_markdown(run: Run, experiments: Path | None, commands: list[str] | None) -> str:
+    bodies = (section_checks, section_training, section_early, section_evaluation,
+              section_trajectories, section_diagnosis,
+              lambda r: section_experiments(r, experiments),
+              lambda r: ['```bash', *(commands or default_commands(r, experiments)), '```', ''])
+    sections: list[str] = []
+    for title, body in zip(SECTIONS, bodies, strict=True):
+        try:
+            lines = body(run)
+        except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:  # malformed input
+            lines = [f'> **Could not build this section:** {type(exc).__name__}: {exc}', '']
+        sections += [f'## {title}', '', *lines]
+    header = [f'# Result: {Path(run.shown).name}', '',
+              f"Run directory `{run.shown}`; report written {datetime.now():%Y-%m-%d %H:%M} by "
+              '`nav-eval-report`.', '', *evidence(run, experiments)]
+    for problem in run.problems:
+        header += [f'> **Unreadable input:** {problem}', '']
+    return '\n'.join(header + sections).rstrip() + '\n'
+
+
+def write_report(run_dir: Path, experiments: Path | None = None,
+                 commands: list[str] | None = None) -> Path:
+    """Write RUN/report/Result.md, Result.html and figures/; returns the Markdown path."""
+    run = load_run(run_dir)
+    if run.figures.is_dir():
+        for stale in run.figures.glob('*.png'):
+            stale.unlink()
+    run.figures.mkdir(parents=True, exist_ok=True)
+    text = build_markdown(run, experiments, commands)
+    report = run.figures.parent / 'Result.md'
+    report.write_text(text)
+    report.with_suffix('.html').write_text(to_html(text, report.parent, run.shown))
+    return report
+
+
+# --- HTML ---------------------------------------------------------------------------------------
+
+HTML_PAGE = """<!DOCTYPE html>
+<html lang="en"><head><meta charset="utf-8"><title>Result: {title}</title><style>
+body {{font-family: sans-serif; max-width: 1150px; margin: 2em auto; padding: 0 1em;
+      line-height: 1.45; color: #222}}
+table {{border-collapse: collapse; margin: 0.6em 0; font-size: 0.92em}}
+th, td {{border: 1px solid #bbb; padding: 3px 8px; vertical-align: top}}
+th {{background: #eee}} img {{max-width: 100%}} summary {{cursor: pointer}}
+pre {{background: #f4f4f4; padding: 0.6em; overflow-x: auto}} code {{background: #f4f4f4}}
+blockquote {{border-left: 4px solid #d33; margin: 0.6em 0; padding: 0.1em 0.8em}}
+</style></head><body>
+{body}
+</body></html>
+"""
+
+
+def to_html(text: str, folder: Path, title: str) -> str:
+    """A stand-alone HTML page of the report: PNGs embedded as base64 data URIs."""
+    try:
+        import markdown  # Python-Markdown, installed with tensorboard
+        text = re.sub(r'<details>', '<details markdown="1">', text)  # render what is inside
+        body = markdown.markdown(text, extensions=['tables', 'fenced_code', 'md_in_html'])
+    except ImportError:  # readable fallback: the Markdown source with the images inlined
+        body = '<pre>' + IMAGE_RE.sub(lambda m: f'</pre><img alt="{m.group(1)}" '
+                                      f'src="{m.group(2)}"><pre>', html.escape(text)) + '</pre>'
+
+    def embed(match: re.Match[str]) -> str:
+        path = folder / html.unescape(match.group(1))
+        if path.suffix.lower() != '.png' or not path.is_file():
+            return match.group(0)
+        return f'src="data:image/png;base64,{base64.b64encode(path.read_bytes()).decode()}"'
+    body = re.sub(r'src="([^"]+)"', embed, body)
+    return HTML_PAGE.format(title=html.escape(title), body=body)
+
+
+# --- command ------------------------------------------------------------------------------------
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(prog='nav-eval-report', description=__doc__.splitlines()[0])
+    parser.add_argument('run_dir', type=Path, help='run directory made by nav-gym-train')
+    parser.add_argument('--experiments', type=Path, metavar='FILE',
+                        help='Markdown experiments log to include (e.g. docs/experiments.md)')
+    args = parser.parse_args(strip_ros_args(argv))
+
+    def body() -> int:
+        try:
+            report = write_report(args.run_dir, args.experiments)
+        except OSError as exc:
+            raise ReportError(f'cannot write the report: {exc}') from exc
+        print(report)
+        print(report.with_suffix('.html'))
+        return 0
+
+    run_command('nav-eval-report', body)
+
+
+if __name__ == '__main__':
+    main()

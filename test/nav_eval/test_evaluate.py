@@ -1,0 +1,153 @@
+"""Evaluation of a tiny DQN through the real ROS graph, the bag it records, its determinism,
+and the diagnosis of one of its failed episodes."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from nav_eval import diagnose, evaluate
+from nav_eval.errors import EvaluationError
+from nav_gym.train_config import TrainConfig
+
+SETS = ['random_train', 'dqn_heldout', 'early_train']
+
+
+class _Spaces(gym.Env):
+    """Only the spaces of visnav/Navigation-v0, to build a model without a sim."""
+
+    observation_space = gym.spaces.Box(0, 255, (3, 84, 84), np.uint8)
+    action_space = gym.spaces.Discrete(3)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return self.observation_space.sample(), {}
+
+    def step(self, action):
+        return self.observation_space.sample(), 0.0, False, False, {}
+
+
+@pytest.fixture(scope='module')
+def run_dir(tmp_path_factory) -> Path:
+    """A run directory with a tiny model (two checkpoints) and a 15-step episode limit."""
+    from stable_baselines3 import DQN
+    path = tmp_path_factory.mktemp('run')
+    config = TrainConfig(max_episode_steps=15)
+    (path / 'config.yaml').write_text(config.to_yaml())
+    model = DQN('CnnPolicy', _Spaces(), buffer_size=64, learning_starts=16, batch_size=8,
+                seed=3, device='cpu')
+    (path / 'checkpoints').mkdir()
+    model.learn(32)
+    model.save(path / 'checkpoints' / 'dqn_32_steps.zip')
+    model.learn(32, reset_num_timesteps=False)
+    model.save(path / 'final_model.zip')
+    return path
+
+
+@pytest.fixture(scope='module')
+def evaluated(run_dir) -> dict:
+    sets = evaluate.plan_sets(run_dir, SETS, (101, 102), (201, 202))
+    return evaluate.evaluate(run_dir, sets, record=True)
+
+
+def test_plan_uses_the_first_checkpoint_after_step_zero_as_early(run_dir):
+    sets = evaluate.plan_sets(run_dir, list(evaluate.DEFAULT_SETS), evaluate.TRAIN_SEEDS,
+                              evaluate.HELDOUT_SEEDS)
+    assert [s.name for s in sets] == list(evaluate.DEFAULT_SETS)
+    by_name = {s.name: s for s in sets}
+    assert by_name['early_heldout'].checkpoint == 'checkpoints/dqn_32_steps.zip'
+    assert by_name['dqn_train'].seeds == tuple(range(101, 111))
+    assert by_name['dqn_heldout'].seeds == tuple(range(201, 211))
+    assert by_name['dqn_heldout'].split == 'heldout'
+
+
+def test_bad_requests_are_clear_errors(run_dir, tmp_path):
+    with pytest.raises(EvaluationError, match='unknown evaluation set'):
+        evaluate.plan_sets(run_dir, ['dqn_validation'], (1,), (2,))
+    with pytest.raises(EvaluationError, match='bad seed list'):
+        evaluate.parse_seeds('101-x')
+    assert evaluate.parse_seeds('101-103,110') == (101, 102, 103, 110)
+    with pytest.raises(EvaluationError, match='not a training run'):
+        evaluate.run_config(tmp_path)
+    with pytest.raises(EvaluationError, match='not found'):
+        evaluate.plan_sets(run_dir, ['dqn_train'], (1,), (2,), final='missing.zip')
+
+
+def test_results_files_and_metrics(run_dir, evaluated):
+    out = run_dir / 'eval'
+    assert [s['name'] for s in evaluated['sets']] == SETS
+    for entry in evaluated['sets']:
+        assert entry['summary']['episodes'] == 2
+        rates = [entry['summary'][k] for k in ('success_rate', 'collision_rate',
+                                               'timeout_rate')]
+        assert sum(rates) == pytest.approx(1.0)
+        for episode in entry['episodes']:
+            assert episode['length'] <= 15
+            assert episode['outcome'] in ('success', 'collision', 'timeout')
+            trace = json.loads((out / 'traces' / entry['name'] /
+                                f"seed_{episode['seed']}.json").read_text())
+            assert len(trace['steps']) == episode['length']
+            assert sum(s['reward'] for s in trace['steps']) == pytest.approx(
+                episode['return'], abs=1e-4)
+            with np.load(out / 'traces' / entry['name'] /
+                         f"seed_{episode['seed']}_frames.npz") as data:
+                assert data['obs'].shape == (episode['length'] + 1, 3, 84, 84)
+            has_q = entry['policy'] == 'dqn'
+            assert all((s['q_values'] is not None) == has_q for s in trace['steps'])
+            if has_q:  # deterministic predict = argmax of the logged Q-values
+                assert all(s['action'] == int(np.argmax(s['q_values'])) for s in trace['steps'])
+    assert (out / 'results.md').read_text().count('\n') == 2 + len(SETS)
+    assert 'Random policy, training seeds (101–102)' in (out / 'results.md').read_text()
+    assert (out / 'episodes.csv').read_text().count('\n') == 1 + 2 * len(SETS)
+    assert evaluated['arena']['half_size'] == pytest.approx(1.0)
+
+
+def test_every_set_is_recorded_as_an_mcap_bag(run_dir, evaluated):
+    from nav_eval.recording import episodes_in_bag, read_bag
+    bag = run_dir / 'eval' / 'bags' / 'dqn_heldout'
+    assert 'mcap' in (bag / 'metadata.yaml').read_text()
+    annotations = episodes_in_bag(bag)
+    entry = evaluated['sets'][1]
+    assert [(a['seed'], a['outcome'], a['checkpoint']) for a in annotations] == [
+        (e['seed'], e['outcome'], 'final_model.zip') for e in entry['episodes']]
+    messages = read_bag(bag)
+    images = next(v for k, v in messages.items() if k.endswith('camera/image_raw'))
+    cmds = next(v for k, v in messages.items() if k.endswith('cmd_vel'))
+    lengths = sum(e['length'] for e in entry['episodes'])
+    assert len(images) == lengths + len(entry['episodes'])  # one per period + reset frames
+    assert len(cmds) == lengths
+
+
+def test_the_same_evaluation_twice_gives_identical_tables(run_dir, evaluated, tmp_path):
+    sets = evaluate.plan_sets(run_dir, SETS, (101, 102), (201, 202))
+    again = evaluate.evaluate(run_dir, sets, out=tmp_path / 'again', record=False)
+    assert again['sets'] == evaluated['sets']
+    for name in ('results.md', 'episodes.csv'):
+        assert (tmp_path / 'again' / name).read_text() == (run_dir / 'eval' / name).read_text()
+
+
+def test_diagnosis_of_a_failed_episode(run_dir, evaluated):
+    result = diagnose.run(run_dir)
+    assert result['set'] == 'dqn_heldout' and result['outcome'] != 'success'
+    status = {v['layer']: v['status'] for v in result['layers']}
+    assert status['action timing'] == 'ok' and status['reward'] == 'ok'
+    assert status['evaluation'] == 'ok'  # the re-run reproduced the actions
+    assert any('reproduced all' in e for v in result['layers'] for e in v['evidence'])
+    md = (run_dir / 'eval' / 'diagnosis.md').read_text()
+    assert 'Earliest layer' in md or 'No layer' in md
+    for figure in result['figures']:
+        assert (run_dir / figure).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
+
+
+def test_evaluate_command_reports_errors_without_traceback(tmp_path):
+    result = subprocess.run([sys.executable, '-m', 'nav_eval.evaluate', str(tmp_path)],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 1
+    assert 'not a training run directory' in result.stderr
+    assert 'Traceback' not in result.stderr
