@@ -91,7 +91,8 @@ def diagnose(trace: dict, frames: np.ndarray, sim: SimConfig, env: EnvConfig,
     verdicts = [
         layers.check_observations(frames, steps),
         layers.check_actions(steps, scenario['start'], env.forward_speed * sim.ctrl_dt,
-                             env.turn_rate * sim.ctrl_dt),
+                             env.turn_rate * sim.ctrl_dt,
+                             layers.arc_chord(env.turn_speed, env.turn_rate, sim.ctrl_dt)),
         layers.check_reward(steps, scenario['initial_distance'], weights),
         layers.check_policy(steps, frames, trace['outcome'], training,
                             layers.centre_band(env.turn_rate * sim.ctrl_dt,
@@ -224,7 +225,8 @@ def run(run_dir: Path, set_name: str | None = None, seed: int | None = None,
     sim = SimConfig.from_dict({k: v for k, v in config.sim_params.items() if k in names})
     results = json.loads((eval_dir / 'results.json').read_text())
     run_values = {'sim_params': config.sim_params, 'forward_speed': config.forward_speed,
-                  'turn_rate': config.turn_rate, 'max_episode_steps': config.max_episode_steps}
+                  'turn_rate': config.turn_rate, 'turn_speed': config.turn_speed,
+                  'max_episode_steps': config.max_episode_steps}
     diagnosis = diagnose(trace, frames, sim, env,
                          training_evidence(run_dir, config.exploration_final_eps),
                          results.get('config'), run_values,
@@ -245,7 +247,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--seed', type=int, help='episode seed within the set')
     parser.add_argument('--no-rerun', action='store_true',
                         help='skip the determinism re-run of the episode')
-    args, _ = parser.parse_known_args(strip_ros_args(argv))
+    args = parser.parse_args(strip_ros_args(argv))
     run_command('nav-eval-diagnose',
                 lambda: run(args.run_dir, args.set_name, args.seed, not args.no_rerun) and 0)
 

@@ -235,7 +235,8 @@ def env_for_run(config: TrainConfig, record: bool, sim: str = 'embedded') -> Nav
     return NavigationEnv(EnvConfig(sim=sim, sim_timeout=max(config.sim_timeout, 5.0),
                                    max_episode_steps=config.max_episode_steps,
                                    forward_speed=config.forward_speed,
-                                   turn_rate=config.turn_rate, sim_params=sim_params))
+                                   turn_rate=config.turn_rate, turn_speed=config.turn_speed,
+                                   sim_params=sim_params))
 
 
 def evaluate(run_dir: Path, sets: list[EvalSet], out: Path | None = None,
@@ -252,6 +253,7 @@ def evaluate(run_dir: Path, sets: list[EvalSet], out: Path | None = None,
     results = {'run_dir': str(run_dir), 'arena': arena_description(config.sim_params),
                'config': {'sim_params': config.sim_params,
                           'forward_speed': config.forward_speed, 'turn_rate': config.turn_rate,
+                          'turn_speed': config.turn_speed,
                           'max_episode_steps': config.max_episode_steps},
                'sets': entries}
     (out / 'results.json').write_text(json.dumps(results, indent=1))
@@ -292,7 +294,7 @@ def main(argv: list[str] | None = None) -> None:
                         'after step 0)')
     parser.add_argument('--out', type=Path, help='output directory (default RUN_DIR/eval)')
     parser.add_argument('--no-record', action='store_true', help='do not write MCAP bags')
-    args, _ = parser.parse_known_args(strip_ros_args(argv))
+    args = parser.parse_args(strip_ros_args(argv))
 
     def body() -> int:
         sets = plan_sets(args.run_dir, [s for s in args.sets.split(',') if s],

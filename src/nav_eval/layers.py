@@ -93,11 +93,19 @@ def _wrap(angle: float) -> float:
     return math.remainder(angle, 2 * math.pi)
 
 
+def arc_chord(speed: float, rate: float, duration: float) -> float:
+    """Straight-line displacement of one period of an arc (0 for a turn in place)."""
+    if rate == 0:
+        return speed * duration
+    return abs(2.0 * speed / rate * math.sin(rate * duration / 2.0))
+
+
 def check_actions(steps: Sequence[dict], start_pose: Sequence[float], forward_step: float,
-                  turn_step: float) -> LayerVerdict:
+                  turn_step: float, turn_advance: float = 0.0) -> LayerVerdict:
     """Each action moved the robot as named, by the configured amount per control period.
 
-    ``forward_step`` (m) and ``turn_step`` (rad) are what one period of action 1 / 0 should do.
+    ``forward_step`` (m), ``turn_step`` (rad) and ``turn_advance`` (m, the chord of an arc turn;
+    0 for turns in place) are what one full period of the actions should do.
     """
     v = LayerVerdict(LAYERS[1])
     wrong, short = [], []
@@ -116,7 +124,11 @@ def check_actions(steps: Sequence[dict], start_pose: Sequence[float], forward_st
             amount, expected = moved, forward_step
         else:
             sign = 1.0 if name == 'left' else -1.0
-            ok = moved < 1e-4 and (sign * turned > 0 or (not full and turned == 0))
+            ok = sign * turned > 0 or (not full and turned == 0)
+            ok = ok and moved <= 1.1 * turn_advance + 1e-4
+            if moved > 1e-4:  # an arc advances along the mean heading of the period
+                heading = math.atan2(y - previous[1], x - previous[0])
+                ok = ok and abs(_wrap(heading - previous[2] - turned / 2)) < 0.1
             amount, expected = abs(turned), turn_step
         if not ok:
             wrong.append(s['step'])
@@ -234,7 +246,7 @@ def check_evaluation(trace: dict, eval_config: dict | None, run_config: dict | N
                      rerun_actions: list[int] | None) -> LayerVerdict:
     v = LayerVerdict(LAYERS[4])
     if eval_config and run_config:
-        keys = ('sim_params', 'forward_speed', 'turn_rate', 'max_episode_steps')
+        keys = ('sim_params', 'forward_speed', 'turn_rate', 'turn_speed', 'max_episode_steps')
         diff = [k for k in keys if eval_config.get(k) != run_config.get(k)]
         if diff:
             v.flag('broken', f'evaluation settings differ from training: {diff}')

@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--experiments', type=Path, default=EXPERIMENTS_LOG,
                         help='Markdown log of task-design attempts to include in the report')
     train_config.add_arguments(parser)
-    args, _ = parser.parse_known_args(strip_ros_args(argv))
+    args = parser.parse_args(strip_ros_args(argv))
     overrides = {k: v for k, v in vars(args).items() if k in train_config.FIELDS}
 
     def body() -> int:

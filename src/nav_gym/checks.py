@@ -98,7 +98,8 @@ def check_actions(env: NavigationEnv) -> Check:
             break
     ok = (len(moves) == 3 and moves[LEFT][1] > 0.05 and moves[RIGHT][1] < -0.05
           and moves[FORWARD][0] > 0.01 and abs(math.remainder(moves[FORWARD][2], 2 * math.pi))
-          < 0.01 and moves[LEFT][0] < 1e-6 and moves[RIGHT][0] < 1e-6)
+          < 0.01 and abs(moves[FORWARD][1]) < 1e-6
+          and max(moves[LEFT][0], moves[RIGHT][0]) < moves[FORWARD][0])
     measured = ', '.join(f'{name}: {moves[a][0] * 100:.1f} cm, {math.degrees(moves[a][1]):+.1f}°'
                          for a, name in ((LEFT, 'left'), (FORWARD, 'forward'), (RIGHT, 'right'))
                          if a in moves)
@@ -120,7 +121,7 @@ def check_reset(env: NavigationEnv) -> Check:
                  f'{not np.array_equal(a, c)}', ok)
 
 
-def check_boundaries(env: NavigationEnv) -> list[Check]:
+def check_boundaries(env: NavigationEnv) -> tuple[list[Check], list[list[float]]]:
     seed, trace = drive_to_goal(env, range(101, 131))
     last = trace[-1] if trace else {}
     goal = Check('Goal detection', 'terminated=True, +5 goal reward, motors stopped',
@@ -135,7 +136,9 @@ def check_boundaries(env: NavigationEnv) -> list[Check]:
                       f"event {end['event']} after {len(crash)} steps, terminated "
                       f"{end['terminated']}, collision term {end['reward_terms']['collision']}",
                       end['event'] == 'collision' and end['terminated'] and not end['truncated'])
-    stops = [t['wheels_after_stop'] for t in (last, end) if t]
+    # the sim's own wheel speeds in the terminal frame (stopped by the sim within the period),
+    # then what the sim reports after the env's stop call at the boundary
+    stops = [w for t in (last, end) if t for w in (t['wheels'], t['wheels_after_stop'])]
     return [goal, collision], stops
 
 

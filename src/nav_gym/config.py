@@ -28,7 +28,9 @@ class EnvConfig:
     split: str = _f('train', "scenario bank: 'train' or 'heldout' (reset options may override)")
     max_episode_steps: int = _f(250, 'control periods before an episode is truncated')
     forward_speed: float = _f(0.12, 'action 1 (forward): linear velocity in m/s')
-    turn_rate: float = _f(1.5, 'actions 0/2 (left/right): angular velocity in rad/s, in place')
+    turn_rate: float = _f(1.5, 'actions 0/2 (left/right): angular velocity in rad/s')
+    turn_speed: float = _f(0.0, 'actions 0/2: linear velocity while turning in m/s (0: turn in '
+                           'place; > 0: an arc, the inner wheel slower, as the workshop allows)')
     progress_weight: float = _f(2.0, 'reward per metre of progress toward the goal')
     step_penalty: float = _f(-0.01, 'reward added every step')
     goal_reward: float = _f(5.0, 'reward for reaching the goal')
@@ -45,5 +47,8 @@ class EnvConfig:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
                 raise TrainConfigError(f'{name} must be a finite number > 0, got {value!r}')
+        if not (math.isfinite(self.turn_speed) and self.turn_speed >= 0):
+            raise TrainConfigError(f'turn_speed must be a finite number >= 0, got '
+                                   f'{self.turn_speed!r}')
         if self.sim_params is None:
             object.__setattr__(self, 'sim_params', {})

@@ -55,8 +55,9 @@ class NavigationEnv(gym.Env):
         self.render_mode = render_mode
         self.observation_space = spaces.Box(0, 255, OBS_SHAPE, np.uint8)
         self.action_space = spaces.Discrete(len(ACTION_NAMES))
-        self._actions = {0: (0.0, self.config.turn_rate), 1: (self.config.forward_speed, 0.0),
-                         2: (0.0, -self.config.turn_rate)}
+        cfg = self.config
+        self._actions = {0: (cfg.turn_speed, cfg.turn_rate), 1: (cfg.forward_speed, 0.0),
+                         2: (cfg.turn_speed, -cfg.turn_rate)}
         self._sim_process: SimProcess | None = None
         self._client: SimClient | None = None
         self._frame: Frame | None = None
@@ -152,6 +153,8 @@ class NavigationEnv(gym.Env):
             'reward_terms': terms, 'pose': frame.pose, 'step': self.step_count,
             'physics_steps': frame.event['physics_steps'], 'is_success': event == 'goal',
             'path_length': frame.event['path_length'],
+            # wheel speeds the sim reports at the end of the period (0 after goal/collision)
+            'wheels': [float(frame.event['wheel_left']), float(frame.event['wheel_right'])],
         }
         if terminated or truncated:
             self._episode_over = True

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import argparse
 
-from nav_gym.cli import add_env_arguments, env_config, run_command
+from nav_gym.cli import add_env_arguments, env_config, run_command, strip_ros_args
 from nav_gym.env import ACTION_NAMES, NavigationEnv
 
 SCRIPT = [1] * 5 + [0] * 3 + [1] * 5 + [2] * 3 + [1] * 5
@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> None:
     add_env_arguments(parser)
     parser.add_argument('--seed', type=int, default=101)
     parser.add_argument('--split', default='train')
-    args = parser.parse_args(argv)
+    args = parser.parse_args(strip_ros_args(argv))
     run_command('nav-gym-episode', lambda: scripted_episode(args))
 
 

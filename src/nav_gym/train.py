@@ -33,6 +33,7 @@ from nav_gym.train_config import TrainConfig
 
 CHECKPOINT_RE = re.compile(r'dqn_(\d+)_steps\.zip$')
 REPLAY_BUFFER = 'replay_buffer.pkl'
+REPLAY_BUFFER_STEP = 'replay_buffer.step'
 
 
 def atomic_write(path: Path, write: Any) -> None:
@@ -52,6 +53,9 @@ def save_checkpoint(model: Any, run_dir: Path, with_buffer: bool) -> Path:
     atomic_write(path, model.save)
     if with_buffer:
         atomic_write(folder / REPLAY_BUFFER, model.save_replay_buffer)
+        # which checkpoint the buffer belongs to: resume loads it only with that one
+        atomic_write(folder / REPLAY_BUFFER_STEP,
+                     lambda h: h.write(str(model.num_timesteps).encode()))
     return path
 
 
@@ -124,7 +128,11 @@ def build_model(config: TrainConfig, run_dir: Path, env: Any, resume: bool) -> A
     model = load_model(path, env, config.device)
     model.tensorboard_log = str(run_dir / 'tb')
     buffer = run_dir / 'checkpoints' / REPLAY_BUFFER
-    if config.save_replay_buffer and buffer.exists():
+    buffer_step = _buffer_step(run_dir / 'checkpoints' / REPLAY_BUFFER_STEP)
+    if config.save_replay_buffer and buffer.exists() and buffer_step != steps:
+        note = (f'without a replay buffer (the saved one belongs to step {buffer_step}, not to '
+                f'this checkpoint)')
+    elif config.save_replay_buffer and buffer.exists():
         try:
             model.load_replay_buffer(buffer)
         except Exception as exc:  # pickle/EOF/shape errors all mean the same to the user
@@ -138,13 +146,21 @@ def build_model(config: TrainConfig, run_dir: Path, env: Any, resume: bool) -> A
     return model
 
 
+def _buffer_step(path: Path) -> int | None:
+    try:
+        return int(path.read_text().strip())
+    except (OSError, ValueError):
+        return None
+
+
 def train(config: TrainConfig, run_dir: Path, resume: bool = False) -> dict[str, Any]:
     """Train (or continue) a run; returns the summary it writes."""
     (run_dir / 'config.yaml').write_text(config.to_yaml())
-    env, timer = build_env(config, run_dir, resume)
+    env = None
     interrupted = False
     start = time.perf_counter()
     try:
+        env, timer = build_env(config, run_dir, resume)
         model = build_model(config, run_dir, env, resume)
         steps_before = model.num_timesteps
         remaining = max(config.total_timesteps - steps_before, 0)
@@ -165,7 +181,8 @@ def train(config: TrainConfig, run_dir: Path, resume: bool = False) -> dict[str,
         wall = time.perf_counter() - start
         steps = model.num_timesteps - steps_before
     finally:
-        env.close()
+        if env is not None:
+            env.close()
     summary = {
         'run_dir': str(run_dir), 'interrupted': interrupted, 'resumed': resume,
         'total_timesteps': config.total_timesteps, 'num_timesteps': model.num_timesteps,
@@ -200,7 +217,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--resume', metavar='RUN_DIR', help='continue a run from its newest '
                         'checkpoint (its config.yaml is the base; flags still override)')
     train_config.add_arguments(parser)
-    args, _ros_args = parser.parse_known_args(strip_ros_args(argv))
+    args = parser.parse_args(strip_ros_args(argv))
     overrides = {k: v for k, v in vars(args).items() if k in train_config.FIELDS}
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
 

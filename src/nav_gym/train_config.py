@@ -47,7 +47,9 @@ class TrainConfig:
     sim: str = _f('auto', "'auto', 'attach' or 'embedded' (see EnvConfig)")
     sim_timeout: float = _f(5.0, 'seconds to wait for the sim before failing')
     forward_speed: float = _f(EnvConfig.forward_speed, 'action 1 (forward): linear velocity, m/s')
-    turn_rate: float = _f(EnvConfig.turn_rate, 'actions 0/2: angular velocity in place, rad/s')
+    turn_rate: float = _f(EnvConfig.turn_rate, 'actions 0/2: angular velocity, rad/s')
+    turn_speed: float = _f(EnvConfig.turn_speed, 'actions 0/2: linear velocity while turning, '
+                           'm/s (0: in place)')
     sim_params: dict = _f(None, 'sim_node parameters for a sim the env starts itself, as a '
                           'mapping (YAML) or JSON on the command line, e.g. \'{"sim_dt": 0.016}\'')
 
@@ -69,6 +71,7 @@ class TrainConfig:
         return EnvConfig(namespace=self.namespace, sim=self.sim, sim_timeout=self.sim_timeout,
                          split=self.split, max_episode_steps=self.max_episode_steps,
                          forward_speed=self.forward_speed, turn_rate=self.turn_rate,
+                         turn_speed=self.turn_speed,
                          sim_params=dict(self.sim_params))
 
     def dqn_kwargs(self) -> dict[str, Any]:

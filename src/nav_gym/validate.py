@@ -13,7 +13,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from nav_gym.checks import Check, run_checklist
-from nav_gym.cli import add_env_arguments, env_config, run_command
+from nav_gym.cli import add_env_arguments, env_config, run_command, strip_ros_args
 from nav_gym.env import NavigationEnv
 
 
@@ -46,7 +46,7 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_env_arguments(parser)
     parser.add_argument('--json', help='also write the checklist as JSON to this file')
-    args = parser.parse_args(argv)
+    args = parser.parse_args(strip_ros_args(argv))
     run_command('nav-gym-validate', lambda: validate(args))
 
 

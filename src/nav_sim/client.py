@@ -33,6 +33,7 @@ from nav_sim import qos, ros_msgs
 from nav_sim.errors import FrameSyncError, ScenarioError, SimUnavailableError
 
 POLL_S = 0.25
+RESET_RETRY_S = 1.0
 
 
 @dataclass(frozen=True)
@@ -107,6 +108,11 @@ class SimClient:
     def where(self) -> str:
         return f"namespace '{self.namespace or '/'}'"
 
+    def _matched(self) -> bool:
+        """Our cmd_vel reaches a subscriber and our observation readers see publishers."""
+        return (self.pub_cmd.get_subscription_count() > 0
+                and all(sub.get_publisher_count() > 0 for sub in self._subs))
+
     def sim_present(self) -> bool:
         return self.node.count_publishers(self.node.resolve_topic_name('camera/image_raw')) > 0
 
@@ -141,11 +147,14 @@ class SimClient:
                 if taken is not None:
                     sub.callback(taken[0])
 
-    def _wait_frame(self, predicate: Callable[[Frame], bool], what: str) -> Frame:
+    def _wait_frame(self, predicate: Callable[[Frame], bool], what: str,
+                    limit: float | None = None) -> Frame | None:
+        """The first frame satisfying ``predicate``; raises after ``self.timeout`` s, or returns
+        None after ``limit`` s if one is given (the caller may then retry)."""
         def arrived() -> bool:
             return self._latest is not None and predicate(self._latest)
 
-        deadline = time.monotonic() + self.timeout
+        deadline = time.monotonic() + (limit if limit is not None else self.timeout)
         while not arrived():
             left = deadline - time.monotonic()
             if left <= 0:
@@ -156,6 +165,8 @@ class SimClient:
                     f'nav_sim in {self.where} is gone (no camera publisher) while waiting for '
                     f'{what}; restart it with `ros2 run nav_sim sim_node`')
         if not arrived():
+            if limit is not None:
+                return None
             raise SimUnavailableError(
                 f'no {what} from nav_sim in {self.where} within {self.timeout} s; is '
                 '`ros2 run nav_sim sim_node` running there (in lockstep mode)?')
@@ -183,7 +194,8 @@ class SimClient:
         sim process this client started has died)."""
         limit = timeout or self.timeout
         deadline = time.monotonic() + limit
-        while not (self.sim_present() and self.cli_reset.service_is_ready()):
+        while not (self.sim_present() and self.cli_reset.service_is_ready()
+                   and self._matched()):
             reason = abort() if abort is not None else None
             if reason:
                 raise SimUnavailableError(f'nav_sim in {self.where} did not start: {reason}')
@@ -207,12 +219,26 @@ class SimClient:
         values = {k: v for k, v in (('seed', seed), ('split', split)) if v is not None}
         if values:
             self.set_parameters(**values)
-        response = self._call(self.cli_reset, Trigger.Request(), 'reset')
-        if not response.success:
-            raise ScenarioError(response.message)
-        scenario = json.loads(response.message)
-        stamp = int(scenario['stamp_ns'])
-        frame = self._wait_frame(lambda f: f.stamp_ns >= stamp, 'first observation after reset')
+        # Discovery can report a match before the sim's publishers deliver to this client: if
+        # the reset frame does not come, reset again (the same seed gives the same scenario).
+        deadline = time.monotonic() + self.timeout
+        while True:
+            response = self._call(self.cli_reset, Trigger.Request(), 'reset')
+            if not response.success:
+                raise ScenarioError(response.message)
+            scenario = json.loads(response.message)
+            stamp = int(scenario['stamp_ns'])
+            left = deadline - time.monotonic()
+            frame = self._wait_frame(lambda f, s=stamp: f.stamp_ns >= s,
+                                     'first observation after reset',
+                                     limit=max(min(RESET_RETRY_S, left), 0.0))
+            if frame is not None:
+                break
+            if time.monotonic() >= deadline:
+                raise SimUnavailableError(
+                    f'no first observation after reset from nav_sim in {self.where} within '
+                    f'{self.timeout} s; is `ros2 run nav_sim sim_node` running there (in '
+                    'lockstep mode)?')
         if frame.stamp_ns != stamp:
             raise FrameSyncError(f'expected the reset frame {stamp} ns, got {frame.stamp_ns} ns')
         return frame, scenario

@@ -73,8 +73,12 @@ class SimConfig:
                      'heldout_layouts'):
             if int(getattr(self, name)) < 1:
                 raise ConfigError(f'{name} must be >= 1, got {getattr(self, name)!r}')
-        if self.settle_steps < 0 or self.num_obstacles < 0:
-            raise ConfigError('settle_steps and num_obstacles must be >= 0')
+        if self.settle_steps < 1:
+            # the reset frame must get a new stamp: clients tell it from the previous episode's
+            # last frame by the stamp
+            raise ConfigError(f'settle_steps must be >= 1, got {self.settle_steps!r}')
+        if self.num_obstacles < 0:
+            raise ConfigError('num_obstacles must be >= 0')
         if not 1.0 <= self.camera_hfov_deg <= 170.0:
             raise ConfigError(f'camera_hfov_deg must be in [1, 170], got {self.camera_hfov_deg}')
 

@@ -30,7 +30,12 @@ def typed_params(params: Mapping[str, Any]) -> dict[str, Any]:
     for key, value in params.items():
         kind = _PARAM_TYPES[key]
         try:
-            out[key] = value if kind is bool and isinstance(value, bool) else kind(value)
+            if kind is bool and isinstance(value, str):
+                if value.lower() not in ('true', 'false'):
+                    raise ValueError(value)
+                out[key] = value.lower() == 'true'
+            else:
+                out[key] = kind(value)
         except (TypeError, ValueError) as exc:
             raise ConfigError(f'sim_node parameter {key}: cannot convert {value!r} to '
                               f'{kind.__name__}') from exc
@@ -68,6 +73,14 @@ def ros_args(namespace: str = '', params: Mapping[str, Any] | None = None,
     return args
 
 
+def _stop_with_parent() -> None:
+    """In the child, before exec: SIGTERM when the parent dies (even by SIGKILL), so a lockstep
+    sim never outlives the env that started it (Linux prctl PR_SET_PDEATHSIG)."""
+    if sys.platform.startswith('linux'):
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG = 1
+
+
 class SimProcess:
     """A sim_node child process; ``stop()`` sends SIGINT and always reaps it."""
 
@@ -79,7 +92,8 @@ class SimProcess:
         self._log = tempfile.TemporaryFile() if quiet else None
         self.process = subprocess.Popen(command, stdout=subprocess.DEVNULL if quiet else None,
                                         stderr=self._log,
-                                        env=dict(env) if env is not None else None)
+                                        env=dict(env) if env is not None else None,
+                                        preexec_fn=_stop_with_parent)
         self.namespace = namespace
 
     def failure(self) -> str | None:

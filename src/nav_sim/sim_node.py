@@ -198,10 +198,10 @@ class SimNode(Node):
         sim, settings = self.sim, self.settings
         stamp = ros_msgs.stamp_from_ns(sim.sim_time_ns)
         pose, twist = sim.pose, sim.twist
-        if self.pub_event.get_subscription_count():
-            self.pub_event.publish(ros_msgs.event_msg(event or EVENT_NONE,
-                                                      self._event_values(physics_steps, pose,
-                                                                         twist), stamp))
+        # the event and the image are always published: a client pairs them to make a frame
+        self.pub_event.publish(ros_msgs.event_msg(event or EVENT_NONE,
+                                                  self._event_values(physics_steps, pose, twist),
+                                                  stamp))
         if self.pub_odom.get_subscription_count():
             self.pub_odom.publish(ros_msgs.odometry_msg(pose, twist, stamp, settings.odom_frame,
                                                         settings.base_frame))

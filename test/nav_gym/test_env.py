@@ -89,6 +89,8 @@ def test_goal_terminates_with_bonus_and_stops_motors(env):
     last = trace[-1]
     assert last['terminated'] and not last['truncated'] and last['is_success']
     assert last['reward_terms']['goal'] == 5.0
+    assert last['wheels'] == [0.0, 0.0]  # stopped by the sim within the period
+    assert trace[-2]['wheels'] != [0.0, 0.0]  # (it was driving before)
     assert last['wheels_after_stop'] == [0.0, 0.0]
     assert not any(t['terminated'] or t['truncated'] for t in trace[:-1])
 
@@ -98,6 +100,7 @@ def test_collision_terminates_with_penalty_and_stops_motors(env):
     last = trace[-1]
     assert last['event'] == 'collision' and last['terminated'] and not last['truncated']
     assert last['reward_terms']['collision'] == -1.0
+    assert last['wheels'] == [0.0, 0.0] and trace[-2]['wheels'] != [0.0, 0.0]
     assert last['wheels_after_stop'] == [0.0, 0.0]
 
 
