@@ -30,6 +30,7 @@ from nav_gym.validate import format_checklist
 STAGES = ('validate the environment', 'train the DQN', 'evaluate on fixed seeds',
           'diagnose a failed episode', 'write the report')
 EXPERIMENTS_LOG = Path('docs/experiments.md')
+VALIDATION_STEPS = 100
 
 
 def stage(number: int) -> None:
@@ -37,9 +38,13 @@ def stage(number: int) -> None:
 
 
 def validate_run(config: TrainConfig, run_dir: Path) -> bool:
-    """The workshop's validation checklist on the run's environment; writes validation.json."""
+    """The workshop's validation checklist on the run's environment; writes validation.json.
+
+    Episodes get at least VALIDATION_STEPS so the scripted drivers can reach the goal and a
+    wall whatever the run's time limit (the time-limit check uses its own 5-step env)."""
     env_config = EnvConfig(**{**asdict(config.env_config()), 'sim': 'embedded',
-                              'namespace': ''})
+                              'namespace': '', 'max_episode_steps':
+                              max(config.max_episode_steps, VALIDATION_STEPS)})
     env = NavigationEnv(env_config)
     try:
         checks = run_checklist(env, lambda **kw: NavigationEnv(env_config, **kw))

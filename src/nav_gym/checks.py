@@ -138,7 +138,8 @@ def check_boundaries(env: NavigationEnv) -> tuple[list[Check], list[list[float]]
                       end['event'] == 'collision' and end['terminated'] and not end['truncated'])
     # the sim's own wheel speeds in the terminal frame (stopped by the sim within the period),
     # then what the sim reports after the env's stop call at the boundary
-    stops = [w for t in (last, end) if t for w in (t['wheels'], t['wheels_after_stop'])]
+    stops = [w for t in (last, end) if t
+             for w in ((t['wheels'],) if t['terminated'] else ()) + (t['wheels_after_stop'],)]
     return [goal, collision], stops
 
 

@@ -14,7 +14,7 @@ import argparse
 from nav_gym.cli import add_env_arguments, env_config, run_command, strip_ros_args
 from nav_gym.env import ACTION_NAMES, NavigationEnv
 
-SCRIPT = [1] * 5 + [0] * 3 + [1] * 5 + [2] * 3 + [1] * 5
+SCRIPT = [0] * 3 + [1] * 2 + [2] * 4 + [1] * 2 + [0] * 3 + [1] * 4
 
 
 def scripted_episode(args: argparse.Namespace) -> int:

@@ -42,7 +42,8 @@ class TrainConfig:
     runs_dir: str = _f('runs', 'directory that holds one sub-directory per run')
     run_name: str = _f('', "run directory name ('' = dqn_<date>_<time>)")
     split: str = _f('train', 'scenario bank used for training')
-    max_episode_steps: int = _f(250, 'control periods before an episode is truncated')
+    max_episode_steps: int = _f(EnvConfig.max_episode_steps, 'control periods before an episode '
+                                'is truncated')
     namespace: str = _f('', 'ROS namespace of the sim node')
     sim: str = _f('auto', "'auto', 'attach' or 'embedded' (see EnvConfig)")
     sim_timeout: float = _f(5.0, 'seconds to wait for the sim before failing')

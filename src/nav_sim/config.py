@@ -29,19 +29,21 @@ class SimConfig:
 
     world: str = _f('arena.xml', 'MJCF file: a path, or a name under share/nav_sim/worlds')
     sim_dt: float = _f(0.032, 'physics timestep in seconds (Webots basicTimeStep default: 32 ms)')
-    action_repeat: int = _f(6, 'physics steps per control period (ctrl_dt = sim_dt * repeat)')
+    action_repeat: int = _f(16, 'physics steps per control period (ctrl_dt = sim_dt * repeat)')
     settle_steps: int = _f(2, 'physics steps with motors stopped after a reset')
     wheel_radius: float = _f(0.0205, 'wheel radius in metres (e-puck: 2.05 cm)')
     axle_length: float = _f(0.052, 'distance between the wheels in metres (e-puck: 5.2 cm)')
     max_wheel_speed: float = _f(6.28, 'wheel speed limit in rad/s (e-puck: 6.28 rad/s)')
     camera_width: int = _f(128, 'native camera image width in pixels')
     camera_height: int = _f(96, 'native camera image height in pixels')
-    camera_hfov_deg: float = _f(48.0, 'horizontal field of view in degrees (e-puck: 0.84 rad)')
+    camera_hfov_deg: float = _f(90.0, 'horizontal field of view in degrees (e-puck: 0.84 rad = '
+                                '48°; a wide-angle lens by default)')
     camera_near_clip: float = _f(0.005, 'camera near clipping distance in metres (surfaces '
                                  'closer than this are not drawn)')
     goal_radius: float = _f(0.1, 'success when the robot centre is this close to the goal (m)')
     goal_marker_radius: float = _f(0.05, 'radius of the green goal cylinder in metres')
-    goal_marker_height: float = _f(0.1, 'height of the green goal cylinder in metres')
+    goal_marker_height: float = _f(0.3, 'height of the green goal cylinder in metres (a beacon '
+                                   'taller than the 16 cm obstacles)')
     min_start_goal_distance: float = _f(0.6, 'minimum straight-line start-goal distance (m)')
     num_obstacles: int = _f(3, 'obstacles per layout (at most the slots in the world)')
     train_layouts: int = _f(20, 'number of layouts in the training bank')

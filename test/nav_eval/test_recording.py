@@ -144,7 +144,7 @@ def test_bag_holds_every_topic_of_a_lockstep_episode(tmp_path, namespace):
         frame, scenario = client.reset(seed=101, split='train')
         stamps = [frame.stamp_ns]
         for _ in range(STEPS):
-            frame = client.step(0.1, 0.3, frame)
+            frame = client.step(0.02, 0.3, frame)  # gentle: no collision in 10 periods
             stamps.append(frame.stamp_ns)
             assert recorder.wait_for(frame.stamp_ns, 5.0)
         assert not recorder.wait_for(frame.stamp_ns + 1, 0.2)  # no frame without a command
@@ -161,7 +161,7 @@ def test_bag_holds_every_topic_of_a_lockstep_episode(tmp_path, namespace):
     check_periods(messages, episode, namespace, stamps)
     commands = episode[f'{namespace}/cmd_vel']
     assert len(commands) == STEPS
-    assert all((m.linear.x, m.angular.z) == (0.1, 0.3) for _, m in commands)
+    assert all((m.linear.x, m.angular.z) == (0.02, 0.3) for _, m in commands)
     times = [t for t, _ in messages[f'{namespace}/cmd_vel']]
     sim_times = {t for topic, msgs in messages.items() for t, _ in msgs
                  if topic not in (f'{namespace}/cmd_vel', EPISODE_TOPIC)}

@@ -133,3 +133,15 @@ def test_config_file_and_flags_override_defaults(tmp_path):
     path.write_text('batch_size: many\n')
     with pytest.raises(TrainConfigError, match='batch_size must be int'):
         build(str(path), {})
+
+
+def test_train_yaml_holds_every_default():
+    import dataclasses
+
+    import yaml
+
+    from nav_gym.train_config import TrainConfig
+    share = Path(get_package_prefix('nav_gym')) / 'share' / 'nav_gym' / 'config' / 'train.yaml'
+    values = yaml.safe_load(share.read_text())
+    defaults = dataclasses.asdict(TrainConfig())
+    assert values == defaults
