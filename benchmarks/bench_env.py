@@ -1,7 +1,7 @@
 """Env steps/s through the ROS wrapper vs. the sim core in process, and the env's share of DQN
 training time, measured side by side in one run.
 
-    .venv/bin/python benchmarks/bench_env.py [--steps 2000] [--dqn-steps 3000]
+    .venv/bin/python benchmarks/bench_env.py [--steps 2000] [--dqn-steps 4000]
 
 1. The same random action sequence (seeded) drives both loops, with the same work per step:
    one control period (action repeat with goal/collision checks), one camera render, the
@@ -103,8 +103,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--steps', type=int, default=2000)
     parser.add_argument('--repeats', type=int, default=2, help='alternating runs; best kept')
-    parser.add_argument('--dqn-steps', type=int, default=3000)
-    parser.add_argument('--learning-starts', type=int, default=500)
+    parser.add_argument('--dqn-steps', type=int, default=4000)
+    parser.add_argument('--learning-starts', type=int, default=160,
+                        help='4%% of the steps, as 2,000 of the workshop\'s 50,000')
     args = parser.parse_args()
     config = EnvConfig(sim='embedded')
     core, ros = [], []
