@@ -56,3 +56,18 @@ def test_full_protocol_reaches_the_learning_target(tmp_path):
     assert sets['random_train']['success_rate'] < 0.15
     assert sets['dqn_heldout']['success_rate'] >= 0.8
     assert sets['dqn_heldout']['collision_rate'] <= 0.1
+
+
+@pytest.mark.parametrize('executable', ['evaluate', 'record', 'report', 'diagnose'])
+def test_ros2_run_finds_every_nav_eval_executable(executable):
+    """As ros2run resolves it: <prefix of nav_eval>/lib/nav_eval/<executable>."""
+    import os
+    from pathlib import Path
+
+    from ament_index_python.packages import get_package_prefix
+    path = Path(get_package_prefix('nav_eval')) / 'lib' / 'nav_eval' / executable
+    assert path.is_file() and os.access(path, os.X_OK)
+    result = subprocess.run([str(path), '--help', '--ros-args', '-r', '__ns:=/x'],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    assert 'usage:' in result.stdout
