@@ -28,10 +28,10 @@ import numpy as np
 from nav_eval import metrics
 from nav_eval.errors import EvaluationError
 from nav_eval.policies import DQNPolicy, Policy, RandomPolicy
+from nav_gym.checkpoints import checkpoints
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.config import EnvConfig
 from nav_gym.env import NavigationEnv
-from nav_gym.train import checkpoints
 from nav_gym.train_config import TrainConfig, load_yaml
 from nav_sim.config import SimConfig, normalise_split
 

@@ -19,11 +19,12 @@ from pathlib import Path
 from nav_eval import diagnose, evaluate, report
 from nav_eval.errors import DiagnosisError
 from nav_gym import train_config
+from nav_gym.checkpoints import checkpoints
 from nav_gym.checks import run_checklist
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.config import EnvConfig
 from nav_gym.env import NavigationEnv
-from nav_gym.train import checkpoints, new_run_dir, train
+from nav_gym.train import new_run_dir, train
 from nav_gym.train_config import TrainConfig
 from nav_gym.validate import format_checklist
 

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import csv
 import math
-import re
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -26,8 +25,9 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.patches import Circle, Polygon, Rectangle  # noqa: E402
 
+from nav_gym.checkpoints import checkpoints  # noqa: E402
+
 DPI = 100
-CHECKPOINT_RE = re.compile(r'dqn_(\d+)_steps\.zip$')
 OUTCOME_COLOURS = {'success': 'tab:green', 'collision': 'tab:red', 'timeout': 'tab:orange'}
 ACTION_ABBREVIATIONS = {'left': 'left', 'forward': 'fwd', 'right': 'right'}
 
@@ -67,8 +67,7 @@ def rolling_mean(values: np.ndarray, window: int) -> np.ndarray:
 
 def checkpoint_steps(run_dir: Path) -> list[int]:
     """Steps of the run's ``checkpoints/dqn_<steps>_steps.zip`` files, ascending."""
-    found = (CHECKPOINT_RE.search(p.name) for p in (run_dir / 'checkpoints').glob('dqn_*.zip'))
-    return sorted(int(m.group(1)) for m in found if m)
+    return [steps for steps, _ in checkpoints(run_dir)]
 
 
 def smoothing_window(episodes: int) -> int:

@@ -37,6 +37,7 @@ from nav_eval.report_format import (
     table,
     to_html,
 )
+from nav_gym.checkpoints import CHECKPOINT_RE
 from nav_gym.cli import run_command, strip_ros_args
 
 SECTIONS = ('1. Observation and action checks', '2. Training',
@@ -172,7 +173,7 @@ def checkpoint_name(entry: dict[str, Any]) -> str:
     if entry.get('policy') != 'dqn':
         return 'random policy'
     name = Path(str(entry.get('checkpoint') or 'final_model.zip')).name
-    match = plots.CHECKPOINT_RE.search(name)
+    match = CHECKPOINT_RE.search(name)
     return f'{name} ({int(match.group(1)):,} steps)' if match else name
 
 

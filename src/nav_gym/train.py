@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import signal
 import sys
 import time
@@ -25,13 +24,13 @@ from pathlib import Path
 from typing import Any
 
 from nav_gym import train_config
+from nav_gym.checkpoints import checkpoints
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.env import NavigationEnv
 from nav_gym.errors import CheckpointError
 from nav_gym.timing import EnvTimer
 from nav_gym.train_config import TrainConfig
 
-CHECKPOINT_RE = re.compile(r'dqn_(\d+)_steps\.zip$')
 REPLAY_BUFFER = 'replay_buffer.pkl'
 REPLAY_BUFFER_STEP = 'replay_buffer.step'
 
@@ -57,16 +56,6 @@ def save_checkpoint(model: Any, run_dir: Path, with_buffer: bool) -> Path:
         atomic_write(folder / REPLAY_BUFFER_STEP,
                      lambda h: h.write(str(model.num_timesteps).encode()))
     return path
-
-
-def checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
-    """(steps, path) of the run's checkpoints, oldest first."""
-    found = []
-    for path in (run_dir / 'checkpoints').glob('dqn_*_steps.zip'):
-        match = CHECKPOINT_RE.search(path.name)
-        if match:
-            found.append((int(match.group(1)), path))
-    return sorted(found)
 
 
 def load_model(path: Path, env: Any, device: str) -> Any:
