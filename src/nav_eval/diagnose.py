@@ -106,17 +106,11 @@ def diagnose(trace: dict, frames: np.ndarray, sim: SimConfig, env: EnvConfig,
         summary += 'No layer shows a problem in the evidence available.'
     else:
         summary += (f'Earliest layer that looks {earliest.status}: {earliest.layer} — '
-                    f'{_first_flag(earliest)}')
+                    f'{earliest.reason}')
     return {'set': trace['set'], 'seed': trace['seed'], 'split': trace['split'],
             'checkpoint': trace.get('checkpoint'), 'outcome': trace['outcome'],
             'earliest_suspect_layer': earliest.layer if earliest else None,
             'layers': [asdict(v) for v in verdicts], 'summary': summary}
-
-
-def _first_flag(v: layers.LayerVerdict) -> str:
-    keywords = ('never', 'not', 'did', 'differ', 'broken', 'blank', 'identical', 'drove',
-                'off', 'does')
-    return next((e for e in v.evidence if any(k in e for k in keywords)), v.evidence[-1])
 
 
 def step_table(trace: dict, frames: np.ndarray) -> str:

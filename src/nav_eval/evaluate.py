@@ -259,14 +259,8 @@ def evaluate(run_dir: Path, sets: list[EvalSet], out: Path | None = None,
     (out / 'results.json').write_text(json.dumps(results, indent=1))
     (out / 'results.md').write_text(results_markdown(entries))
     (out / 'episodes.csv').write_text(metrics.episodes_csv(
-        (e['name'], [_episode(d) for d in e['episodes']]) for e in entries))
+        (e['name'], e['episodes']) for e in entries))
     return results
-
-
-def _episode(d: dict[str, Any]) -> metrics.EpisodeResult:
-    values = dict(d)
-    values['episode_return'] = values.pop('return')
-    return metrics.EpisodeResult(**values)
 
 
 def results_markdown(entries: list[dict[str, Any]]) -> str:

@@ -29,11 +29,12 @@ class LayerVerdict:
     layer: str
     status: str = 'ok'  # ok | suspect | broken | n/a
     evidence: list[str] = field(default_factory=list)
+    reason: str = ''  # the first finding at the verdict's (most severe) status
 
     def flag(self, status: str, text: str) -> None:
         order = ('n/a', 'ok', 'suspect', 'broken')
         if order.index(status) > order.index(self.status):
-            self.status = status
+            self.status, self.reason = status, text
         self.evidence.append(text)
 
     def note(self, text: str) -> None:

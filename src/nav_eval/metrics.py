@@ -123,15 +123,14 @@ def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
     return '\n'.join(lines)
 
 
-def episodes_csv(sets: Iterable[tuple[str, Sequence[EpisodeResult]]]) -> str:
-    """All episodes as CSV, one row each, prefixed by the set name."""
-    names = [f.name for f in fields(EpisodeResult)]
+def episodes_csv(sets: Iterable[tuple[str, Sequence[dict]]]) -> str:
+    """All episodes as CSV, one row each, prefixed by the set name; the episodes are
+    :meth:`EpisodeResult.to_dict` rows (as in results.json)."""
+    names = [('return' if f.name == 'episode_return' else f.name) for f in fields(EpisodeResult)]
     out = io.StringIO()
     writer = csv.writer(out, lineterminator='\n')
-    writer.writerow(['set', *[('return' if n == 'episode_return' else n) for n in names]])
+    writer.writerow(['set', *names])
     for set_name, episodes in sets:
-        for e in episodes:
-            row = e.to_dict()
-            writer.writerow([set_name, *[row['return' if n == 'episode_return' else n]
-                                         for n in names]])
+        for row in episodes:
+            writer.writerow([set_name, *[row[n] for n in names]])
     return out.getvalue()

@@ -94,6 +94,7 @@ def test_swapped_action_mapping_is_found_as_the_earliest_broken_layer():
     trace, frames = episode(actions, mapping=(-1, 0, 1))  # left turns clockwise
     result = diagnose(trace, frames, SIM, ENV)
     assert result['earliest_suspect_layer'] == 'action timing'
+    assert 'did not move the robot as named' in result['summary']
     verdict = result['layers'][1]
     assert verdict['status'] == 'broken' and 'did not move the robot as named' in \
         verdict['evidence'][0]

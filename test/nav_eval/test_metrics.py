@@ -60,7 +60,8 @@ def test_table_and_csv():
     s = summarize(_episodes())
     table = metrics.markdown_table(metrics.TABLE_COLUMNS, [metrics.summary_row('DQN', s)])
     assert '| DQN | 4 | 50% | 25% | 25% | 83.0 | 0.450 | 1.650 |' in table
-    rows = list(csv.DictReader(io.StringIO(metrics.episodes_csv([('dqn', _episodes())]))))
+    text = metrics.episodes_csv([('dqn', [e.to_dict() for e in _episodes()])])
+    rows = list(csv.DictReader(io.StringIO(text)))
     assert [r['outcome'] for r in rows] == ['success', 'collision', 'timeout', 'success']
     assert rows[0]['set'] == 'dqn' and float(rows[0]['spl']) == pytest.approx(0.8)
     assert float(rows[2]['return']) == pytest.approx(-2.4)
