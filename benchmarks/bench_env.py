@@ -10,12 +10,17 @@ training time, measured side by side in one run.
 2. A short DQN('CnnPolicy') run with the workshop settings (learning starts after
    ``--learning-starts`` steps) through the ROS env: the share of wall-clock time spent inside
    ``env.step``/``env.reset`` against the learner.  Target: under 20% on a 2-core machine.
+   It runs twice, each in a child process because OpenMP reads its settings once: with the
+   passive OpenMP waits that training uses (``nav_gym.timing.quiet_learner_threads``) and with
+   libgomp's default spinning waits, for comparison.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
 import sys
 import time
 
@@ -28,7 +33,7 @@ import numpy as np  # noqa: E402
 from nav_gym.config import EnvConfig  # noqa: E402
 from nav_gym.env import NavigationEnv, reward_terms  # noqa: E402
 from nav_gym.observation import rgb_to_observation  # noqa: E402
-from nav_gym.timing import EnvTimer  # noqa: E402
+from nav_gym.timing import EnvTimer, quiet_learner_threads  # noqa: E402
 from nav_sim.sim import NavSim, twist_to_wheels  # noqa: E402
 
 
@@ -39,8 +44,8 @@ def actions(n: int) -> np.ndarray:
 def in_process(steps: int, config: EnvConfig) -> float:
     """The env's work without ROS: NavSim + observation + reward, resets at episode ends."""
     sim = NavSim()
-    speeds = {0: (0.0, config.turn_rate), 1: (config.forward_speed, 0.0),
-              2: (0.0, -config.turn_rate)}
+    speeds = {0: (config.turn_speed, config.turn_rate), 1: (config.forward_speed, 0.0),
+              2: (config.turn_speed, -config.turn_rate)}  # as NavigationEnv maps its actions
     commands = {a: twist_to_wheels(*v, sim.config) for a, v in speeds.items()}
     seed = 0
     try:
@@ -99,6 +104,31 @@ def dqn_share(steps: int, learning_starts: int, config: EnvConfig
     return timer.env_seconds, wall, steps / wall, timer.env_seconds / wall
 
 
+def dqn_share_child(args: argparse.Namespace, passive: bool) -> dict[str, float]:
+    """Run ``dqn_share`` in a fresh interpreter (OpenMP reads OMP_WAIT_POLICY once)."""
+    env = {k: v for k, v in os.environ.items() if k != 'OMP_WAIT_POLICY'}
+    command = [sys.executable, __file__, '--dqn-only', '--dqn-steps', str(args.dqn_steps),
+               '--learning-starts', str(args.learning_starts)]
+    if not passive:
+        command.append('--spinning-threads')
+    out = subprocess.run(command, env=env, check=True, capture_output=True, text=True).stdout
+    return json.loads(out.strip().splitlines()[-1])
+
+
+def report_dqn(label: str, r: dict[str, float], steps: int, learning_starts: int) -> None:
+    env_per_step = r['env_s'] / steps
+    # the rest of the wall time is the learner and SB3's bookkeeping (charged here to the
+    # learning steps, which favours the env a little): extrapolate to 50k steps / 2k starts
+    learner_per_step = (r['wall'] - r['env_s']) / max(steps - learning_starts, 1)
+    full = env_per_step * 50_000 / (env_per_step * 50_000 + learner_per_step * 48_000)
+    print(f'  {label}: {r["wall"]:.1f} s, {steps / r["wall"]:.0f} steps/s; env '
+          f'{env_per_step * 1e3:.2f} ms/step, learner {learner_per_step * 1e3:.2f} ms per '
+          f'learning step')
+    print(f'    env share of this run\'s wall-clock: {r["share"]:6.1%}; extrapolated to 50k '
+          f'steps (2k before learning): {full:6.1%}  (target < 20%: '
+          f"{'met' if full < 0.2 else 'NOT met'})")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--steps', type=int, default=2000)
@@ -106,8 +136,16 @@ def main() -> None:
     parser.add_argument('--dqn-steps', type=int, default=4000)
     parser.add_argument('--learning-starts', type=int, default=160,
                         help='4%% of the steps, as 2,000 of the workshop\'s 50,000')
+    parser.add_argument('--dqn-only', action='store_true', help=argparse.SUPPRESS)
+    parser.add_argument('--spinning-threads', action='store_true', help=argparse.SUPPRESS)
     args = parser.parse_args()
     config = EnvConfig(sim='embedded')
+    if args.dqn_only:  # child process: one DQN measurement as JSON
+        if not args.spinning_threads:
+            quiet_learner_threads()
+        env_s, wall, _, share = dqn_share(args.dqn_steps, args.learning_starts, config)
+        print(json.dumps({'env_s': env_s, 'wall': wall, 'share': share}))
+        return
     core, ros = [], []
     for _ in range(args.repeats):
         core.append(in_process(args.steps, config))
@@ -120,19 +158,15 @@ def main() -> None:
     print(f'  NavigationEnv through the nav_sim node:       {best_ros:7.0f} /s  '
           f'runs: {[round(v) for v in ros]}')
     print(f'  ratio ROS env / in process:                   {best_ros / best_core:7.1%}')
-    env_s, wall, rate, share = dqn_share(args.dqn_steps, args.learning_starts, config)
-    # the rest of the wall time is the learner and SB3's bookkeeping (charged here to the
-    # learning steps, which favours the env a little): extrapolate to 50k steps / 2k starts
-    env_per_step = env_s / args.dqn_steps
-    learner_per_step = (wall - env_s) / max(args.dqn_steps - args.learning_starts, 1)
-    full = env_per_step * 50_000 / (env_per_step * 50_000 + learner_per_step * 48_000)
     print(f'DQN CnnPolicy, {args.dqn_steps} steps ({args.learning_starts} before learning '
-          f'starts): {wall:.1f} s, {rate:.0f} steps/s; env {env_per_step * 1e3:.2f} ms/step, '
-          f'learner {learner_per_step * 1e3:.2f} ms per learning step')
-    print(f'  env share of this run\'s wall-clock:          {share:7.1%}  (target < 20%: '
-          f"{'met' if share < 0.2 else 'NOT met'})")
-    print(f'  extrapolated to 50k steps (2k before learning): {full:5.1%}  (target < 20%: '
-          f"{'met' if full < 0.2 else 'NOT met'})")
+          'starts), through the ROS env:')
+    passive = dqn_share_child(args, passive=True)
+    spinning = dqn_share_child(args, passive=False)
+    report_dqn('OpenMP passive waits (as training)', passive, args.dqn_steps,
+               args.learning_starts)
+    report_dqn('OpenMP default spinning waits    ', spinning, args.dqn_steps,
+               args.learning_starts)
+    print(f'  wall-clock passive / spinning: {passive["wall"] / spinning["wall"]:6.1%}')
 
 
 if __name__ == '__main__':

@@ -32,6 +32,7 @@ from nav_gym.checkpoints import checkpoints
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.config import EnvConfig
 from nav_gym.env import NavigationEnv
+from nav_gym.timing import quiet_learner_threads
 from nav_gym.train_config import TrainConfig, load_yaml
 from nav_sim.config import SimConfig, normalise_split
 
@@ -289,6 +290,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--out', type=Path, help='output directory (default RUN_DIR/eval)')
     parser.add_argument('--no-record', action='store_true', help='do not write MCAP bags')
     args = parser.parse_args(strip_ros_args(argv))
+    quiet_learner_threads()  # the policy's forward passes must not spin against the sim
 
     def body() -> int:
         sets = plan_sets(args.run_dir, [s for s in args.sets.split(',') if s],

@@ -25,6 +25,7 @@ from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.config import EnvConfig
 from nav_gym.env import NavigationEnv
 from nav_gym.train import new_run_dir, train
+from nav_gym.timing import quiet_learner_threads
 from nav_gym.train_config import TrainConfig
 from nav_gym.validate import format_checklist
 
@@ -103,6 +104,7 @@ def main(argv: list[str] | None = None) -> None:
     train_config.add_arguments(parser)
     args = parser.parse_args(strip_ros_args(argv))
     overrides = {k: v for k, v in vars(args).items() if k in train_config.FIELDS}
+    quiet_learner_threads()
 
     def body() -> int:
         if args.resume:

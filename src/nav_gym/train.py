@@ -28,7 +28,7 @@ from nav_gym.checkpoints import checkpoints
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.env import NavigationEnv
 from nav_gym.errors import CheckpointError
-from nav_gym.timing import EnvTimer
+from nav_gym.timing import EnvTimer, quiet_learner_threads
 from nav_gym.train_config import TrainConfig
 
 REPLAY_BUFFER = 'replay_buffer.pkl'
@@ -179,6 +179,7 @@ def train(config: TrainConfig, run_dir: Path, resume: bool = False) -> dict[str,
         'steps_per_s': round(steps / wall, 2) if wall > 0 else None,
         'env_time_s': round(timer.env_seconds, 2),
         'env_share': round(timer.env_seconds / wall, 4) if wall > 0 else None,
+        'omp_wait_policy': os.environ.get('OMP_WAIT_POLICY', 'default'),
         'episodes': len(env.get_episode_rewards()),
         'config': asdict(config),
     }
@@ -209,6 +210,7 @@ def main(argv: list[str] | None = None) -> None:
     args = parser.parse_args(strip_ros_args(argv))
     overrides = {k: v for k, v in vars(args).items() if k in train_config.FIELDS}
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    quiet_learner_threads()
 
     def body() -> int:
         if args.resume:

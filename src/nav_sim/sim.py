@@ -122,8 +122,7 @@ class NavSim:
         self.world.set_goal(*scenario.goal)
         self.world.set_robot_pose(*scenario.start)
         mujoco.mj_forward(self.world.model, self.world.data)
-        for _ in range(self.config.settle_steps):
-            self._physics_step()
+        self._run(self.config.settle_steps, check_events=False)
         self.scenario = scenario
         self.episode += 1
         self.episode_step = 0
@@ -135,29 +134,22 @@ class NavSim:
     def stop(self) -> None:
         """Stop the motors (the robot stays where it is)."""
         self.wheels = WheelCommand(0.0, 0.0)
-        self.world.data.qvel[self.world.qvel_adr] = 0.0
+        self.world.data.qvel[self.world.qvel_slice] = 0.0
 
     def step(self, command: WheelCommand) -> StepResult:
         """Drive with ``command`` for one control period, stopping early on goal or collision."""
         if self.scenario is None:
             raise EpisodeNotStartedError('call reset(seed, split) before step()')
         self.period += 1
-        steps = 0
         if self.done:  # the episode has ended: the motors stay stopped, time still passes
-            for _ in range(self.config.action_repeat):
-                self._physics_step()
+            self._run(self.config.action_repeat, check_events=False)
             return self._result(self.last_event, 0)
         self.episode_step += 1
         self.wheels = command
-        event = EVENT_NONE
-        for _ in range(self.config.action_repeat):
-            self._physics_step()
-            steps += 1
-            event = self._check_event()
-            if event != EVENT_NONE:
-                self.stop()
-                self.done = True
-                break
+        event, steps = self._run(self.config.action_repeat, check_events=True)
+        if event != EVENT_NONE:
+            self.stop()
+            self.done = True
         self.last_event = event
         return self._result(event, steps)
 
@@ -165,33 +157,51 @@ class NavSim:
         return StepResult(event, steps, self.pose, self.distance, self.done, self.episode_step,
                           self.period)
 
-    def _check_event(self) -> str:
-        if self.distance <= self.config.goal_radius:
-            return EVENT_GOAL  # success takes precedence over a contact in the same step
-        if self.world.robot_in_collision():
-            return EVENT_COLLISION
-        return EVENT_NONE
+    def _run(self, steps: int, check_events: bool) -> tuple[str, int]:
+        """Advance up to ``steps`` physics steps of ``sim_dt`` at the current wheel speeds.
 
-    def _physics_step(self) -> None:
-        """Advance sim_dt: exact arc motion of the wheel speeds, then kinematics and contacts."""
-        dt = self.config.sim_dt
+        Each step moves the base along the exact arc of the wheel speeds, then MuJoCo computes
+        kinematics and contacts for the new pose.  With ``check_events`` the loop stops after
+        the first step that reaches the goal (``goal_radius``) or touches an obstacle; a goal wins
+        over a contact in the same step.
+        Returns ``(event, steps run)``.  This is the sim's hot loop (16 steps per control
+        period), so the per-period constants are hoisted and the pose lives in locals.
+        """
+        cfg, world = self.config, self.world
+        model, data = world.model, world.data
+        qpos, pose_slice = data.qpos, world.qpos_slice
+        dt = cfg.sim_dt
         linear, angular = self.twist
-        x, y, yaw = (float(v) for v in self.world.data.qpos[self.world.qpos_adr])
-        if abs(angular) < 1e-9:
-            nx, ny = x + linear * dt * math.cos(yaw), y + linear * dt * math.sin(yaw)
-        else:
-            radius = linear / angular
-            nx = x + radius * (math.sin(yaw + angular * dt) - math.sin(yaw))
-            ny = y - radius * (math.cos(yaw + angular * dt) - math.cos(yaw))
-        nyaw = yaw + angular * dt
-        data = self.world.data
-        data.qpos[self.world.qpos_adr] = (nx, ny, nyaw)
-        data.qvel[self.world.qvel_adr] = (linear * math.cos(nyaw), linear * math.sin(nyaw),
-                                          angular)
-        self.path_length += math.hypot(nx - x, ny - y)
-        self.total_physics_steps += 1
-        data.time = self.total_physics_steps * self.config.sim_dt
-        mujoco.mj_fwdPosition(self.world.model, data)
+        straight = abs(angular) < 1e-9
+        radius = 0.0 if straight else linear / angular
+        x, y, yaw = (float(v) for v in qpos[pose_slice])
+        gx, gy = self.goal
+        path_length, total = self.path_length, self.total_physics_steps
+        event, done_steps = EVENT_NONE, 0
+        for _ in range(steps):
+            if straight:
+                nx, ny = x + linear * dt * math.cos(yaw), y + linear * dt * math.sin(yaw)
+            else:
+                nx = x + radius * (math.sin(yaw + angular * dt) - math.sin(yaw))
+                ny = y - radius * (math.cos(yaw + angular * dt) - math.cos(yaw))
+            nyaw = yaw + angular * dt
+            path_length += math.hypot(nx - x, ny - y)
+            x, y, yaw = nx, ny, nyaw
+            qpos[pose_slice] = (x, y, yaw)
+            total += 1
+            data.time = total * dt
+            mujoco.mj_fwdPosition(model, data)
+            done_steps += 1
+            if check_events:
+                if math.hypot(gx - x, gy - y) <= cfg.goal_radius:
+                    event = EVENT_GOAL  # success takes precedence over a contact
+                    break
+                if data.ncon and world.robot_in_collision():
+                    event = EVENT_COLLISION
+                    break
+        data.qvel[world.qvel_slice] = (linear * math.cos(yaw), linear * math.sin(yaw), angular)
+        self.path_length, self.total_physics_steps = path_length, total
+        return event, done_steps
 
     # --- sensing --------------------------------------------------------------------------
     def render(self) -> np.ndarray:

@@ -33,7 +33,7 @@ from nav_sim.sim import EVENT_NONE, NavSim, WheelCommand, twist_to_wheels
 
 DYNAMIC = ('seed', 'split', 'realtime_rate', 'cmd_vel_timeout')
 WARN_PERIOD_S = 2.0
-IDLE_WAIT_NS = 2_000_000   # lockstep: look at services after 2 ms without a command
+IDLE_WAIT_NS = 2_000_000   # lockstep: look at timers and the rest after 2 ms without a command
 SERVICE_EVERY = 16         # ... and at least every 16 commands
 
 
@@ -232,18 +232,24 @@ class SimNode(Node):
 
 def spin_lockstep(node: SimNode, executor: SingleThreadedExecutor) -> None:
     """Serve ``cmd_vel`` from a bare wait set (as ``rclpy.wait_for_message`` does) and let the
-    executor handle services, parameters and the rest whenever no command is pending.
+    executor handle services, parameters and the rest.
 
     The generic executor costs about a third of a millisecond per callback, as much as the
-    sim's step and render together; lockstep commands are the hot path, so they skip it.
+    sim's step and render together; lockstep commands are the hot path, so they skip it.  The
+    wait set also holds the node's services, so a ``reset``/``stop`` request wakes the loop at
+    once (episode boundaries are on the training path too); anything else (timers, parameter
+    events) is looked at after ``IDLE_WAIT_NS`` without a command.
     """
     context = node.context
-    wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, context.handle)
     sub = node.sub_cmd
+    services = list(node.services)
+    wait_set = _rclpy.WaitSet(1, 0, 0, 0, len(services), 0, context.handle)
     served = 0
     while context.ok():
         wait_set.clear_entities()
         wait_set.add_subscription(sub.handle)
+        for service in services:
+            wait_set.add_service(service.handle)
         wait_set.wait(IDLE_WAIT_NS)
         taken = None
         if sub.handle.pointer in wait_set.get_ready_entities('subscription'):

@@ -55,10 +55,10 @@ class World:
         self.camera_id = name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA)
         self.robot_geom = name2id(m, mujoco.mjtObj.mjOBJ_GEOM, 'robot_body')
         self.robot_body = name2id(m, mujoco.mjtObj.mjOBJ_BODY, 'robot')
-        self.qpos_adr = [m.jnt_qposadr[name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)]
-                         for j in ('base_x', 'base_y', 'base_yaw')]
-        self.qvel_adr = [m.jnt_dofadr[name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)]
-                         for j in ('base_x', 'base_y', 'base_yaw')]
+        joints = [name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)
+                  for j in ('base_x', 'base_y', 'base_yaw')]
+        self.qpos_slice = _consecutive([int(m.jnt_qposadr[j]) for j in joints], 'qpos')
+        self.qvel_slice = _consecutive([int(m.jnt_dofadr[j]) for j in joints], 'qvel')
         self.goal_mocap = m.body_mocapid[name2id(m, mujoco.mjtObj.mjOBJ_BODY, 'goal')]
         self.obstacle_geoms: list[int] = []
         self.obstacle_mocaps: list[int] = []
@@ -103,11 +103,11 @@ class World:
         self.data.mocap_pos[self.goal_mocap] = (x, y, self.config.goal_marker_height / 2.0)
 
     def set_robot_pose(self, x: float, y: float, yaw: float) -> None:
-        self.data.qpos[self.qpos_adr] = (x, y, yaw)
-        self.data.qvel[self.qvel_adr] = 0.0
+        self.data.qpos[self.qpos_slice] = (x, y, yaw)
+        self.data.qvel[self.qvel_slice] = 0.0
 
     def robot_pose(self) -> tuple[float, float, float]:
-        x, y, yaw = (float(v) for v in self.data.qpos[self.qpos_adr])
+        x, y, yaw = (float(v) for v in self.data.qpos[self.qpos_slice])
         return x, y, math.remainder(yaw, 2.0 * math.pi)
 
     def goal_position(self) -> tuple[float, float]:
@@ -143,3 +143,11 @@ class World:
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+
+def _consecutive(addresses: list[int], what: str) -> slice:
+    """The base joints' (x, y, yaw) addresses as one slice (a view, cheap in the hot loop)."""
+    first = addresses[0]
+    if addresses != list(range(first, first + len(addresses))):
+        raise ValueError(f'the robot base joints must be consecutive in {what}, got {addresses}')
+    return slice(first, first + len(addresses))

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 import json
+import os
 import signal
 import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -75,6 +77,8 @@ def test_smoke_training_checkpoints_resumes_and_loads(tmp_path):
     summary = json.loads((run_dir / 'summary.json').read_text())
     assert summary['num_timesteps'] == 300 and 0 < summary['env_share'] < 1
     assert summary['config']['learning_rate'] == 1e-4 and summary['config']['seed'] == 9
+    # the learner's OpenMP threads wait passively (see nav_gym.timing) unless the user chose
+    assert summary['omp_wait_policy'] == os.environ.get('OMP_WAIT_POLICY', 'PASSIVE')
 
     result = run([ros2_run('nav_gym', 'train'), '--resume', str(run_dir),
                   '--total-timesteps', '450'])
@@ -145,3 +149,16 @@ def test_train_yaml_holds_every_default():
     values = yaml.safe_load(share.read_text())
     defaults = dataclasses.asdict(TrainConfig())
     assert values == defaults
+
+
+@pytest.mark.parametrize('preset, expected', [(None, 'PASSIVE'), ('ACTIVE', 'ACTIVE')])
+def test_learner_threads_wait_passively_unless_the_user_chose(preset, expected):
+    code = ('from nav_gym.timing import quiet_learner_threads; p = quiet_learner_threads(); '
+            'import os, torch; print(p, os.environ["OMP_WAIT_POLICY"])')
+    env = {k: v for k, v in os.environ.items() if k != 'OMP_WAIT_POLICY'}
+    if preset:
+        env['OMP_WAIT_POLICY'] = preset
+    out = subprocess.run([sys.executable, '-c', code], env=env, capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == [expected, expected]
