@@ -27,11 +27,12 @@ from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.config import EnvConfig
 from nav_sim.config import SimConfig
 
-SEARCH_ORDER = ('dqn_heldout', 'dqn_train')
+# the final model's failures first; if it fails nowhere, the early checkpoint's
+SEARCH_ORDER = ('dqn_heldout', 'dqn_train', 'early_heldout', 'early_train')
 
 
 def pick_episode(eval_dir: Path, set_name: str | None, seed: int | None) -> tuple[str, int]:
-    """The (set, seed) to diagnose: as given, or the first failure of the DQN sets."""
+    """The (set, seed) to diagnose: as given, or the first failure in ``SEARCH_ORDER``."""
     results_path = eval_dir / 'results.json'
     if not results_path.is_file():
         raise DiagnosisError(f'no evaluation in {eval_dir}; run `ros2 run nav_eval evaluate '

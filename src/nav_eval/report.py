@@ -267,13 +267,17 @@ def dqn_sets_for_examples(run: Run) -> list[dict[str, Any]]:
 
 def pick_examples(run: Run) -> tuple[Any, Any]:
     """(successful, failed) (path, trace) pairs of the final DQN; the failure is the diagnosed
-    episode when its trace exists."""
+    episode when its trace exists (the early checkpoint's when the final model never failed)."""
     traces = [t for s in dqn_sets_for_examples(run) for t in load_traces(run, s['name'])]
     success = next((t for t in traces if t[1].get('outcome') == 'success'), None)
     diagnosis = run.diagnosis or {}
     failures = [t for t in traces if t[1].get('outcome') != 'success']
     failed = next((t for t in failures if t[1].get('set') == diagnosis.get('set')
                    and t[1].get('seed') == diagnosis.get('seed')), None)
+    if failed is None and not failures and diagnosis.get('set'):
+        # the final model failed nowhere: the diagnosed failure is the early checkpoint's
+        failed = next((t for t in load_traces(run, diagnosis['set'])
+                       if t[1].get('seed') == diagnosis.get('seed')), None)
     return success, failed or (failures[0] if failures else None)
 
 

@@ -30,7 +30,7 @@ class EnvConfig:
                                 '(100 x 0.512 s = 51 s)')
     forward_speed: float = _f(0.12, 'action 1 (forward): linear velocity in m/s')
     turn_rate: float = _f(0.75, 'actions 0/2 (left/right): angular velocity in rad/s')
-    turn_speed: float = _f(0.02, 'actions 0/2: linear velocity while turning in m/s (0: turn in '
+    turn_speed: float = _f(0.03, 'actions 0/2: linear velocity while turning in m/s (0: turn in '
                            'place; > 0: an arc, the inner wheel slower, as the workshop allows)')
     progress_weight: float = _f(2.0, 'reward per metre of progress toward the goal')
     step_penalty: float = _f(-0.01, 'reward added every step')

@@ -40,6 +40,13 @@ class SimConfig:
                                 '48°; a wide-angle lens by default)')
     camera_near_clip: float = _f(0.005, 'camera near clipping distance in metres (surfaces '
                                  'closer than this are not drawn)')
+    camera_mount_forward: float = _f(0.0, 'camera position ahead of the robot centre in metres '
+                                     '(0: on a mast over the centre; the e-puck\'s own camera '
+                                     'is at the front edge, 0.038)')
+    camera_mount_height: float = _f(0.10, 'camera height above the floor in metres (e-puck: '
+                                    '0.0455)')
+    camera_pitch_deg: float = _f(25.0, 'camera tilt below the horizontal in degrees (e-puck: '
+                                 '0, level)')
     goal_radius: float = _f(0.1, 'success when the robot centre is this close to the goal (m)')
     goal_marker_radius: float = _f(0.05, 'radius of the green goal cylinder in metres')
     goal_marker_height: float = _f(0.3, 'height of the green goal cylinder in metres (a beacon '
@@ -65,7 +72,7 @@ class SimConfig:
 
     def __post_init__(self) -> None:
         positive = ('sim_dt', 'wheel_radius', 'axle_length', 'max_wheel_speed', 'goal_radius',
-                    'camera_near_clip',
+                    'camera_near_clip', 'camera_mount_height',
                     'goal_marker_radius', 'goal_marker_height', 'min_start_goal_distance')
         for name in positive:
             value = getattr(self, name)
@@ -83,6 +90,12 @@ class SimConfig:
             raise ConfigError('num_obstacles must be >= 0')
         if not 1.0 <= self.camera_hfov_deg <= 170.0:
             raise ConfigError(f'camera_hfov_deg must be in [1, 170], got {self.camera_hfov_deg}')
+        if not -89.0 <= self.camera_pitch_deg <= 89.0:
+            raise ConfigError(f'camera_pitch_deg must be in [-89, 89], got '
+                              f'{self.camera_pitch_deg!r}')
+        if not math.isfinite(self.camera_mount_forward):
+            raise ConfigError(f'camera_mount_forward must be finite, got '
+                              f'{self.camera_mount_forward!r}')
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> SimConfig:

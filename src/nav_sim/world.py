@@ -41,6 +41,7 @@ class World:
         m.vis.global_.offheight = max(cfg.camera_height, 1)
         cam = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA)
         m.cam_fovy[cam] = cfg.camera_fovy_deg
+        self._mount_camera(cam)
         # MuJoCo's clipping planes are relative to the model extent, which the parked obstacle
         # slots inflate to metres: the default near plane would hide anything within ~7 cm of
         # the camera (the goal at the moment of success, a wall just before a collision).
@@ -48,6 +49,20 @@ class World:
         goal = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, 'goal')
         m.geom_size[goal, :2] = (cfg.goal_marker_radius, cfg.goal_marker_height / 2.0)
         m.geom_rbound[goal] = math.hypot(cfg.goal_marker_radius, cfg.goal_marker_height / 2.0)
+
+    def _mount_camera(self, cam: int) -> None:
+        """Place the camera on the robot: ahead of its centre, above the floor, tilted down."""
+        m, cfg = self.model, self.config
+        body_z = float(m.body_pos[m.cam_bodyid[cam]][2])
+        m.cam_pos[cam] = (cfg.camera_mount_forward, 0.0, cfg.camera_mount_height - body_z)
+        pitch = math.radians(cfg.camera_pitch_deg)
+        # MuJoCo cameras look along their -z axis with +x right and +y up in the image
+        right = np.array([0.0, -1.0, 0.0])
+        up = np.array([math.sin(pitch), 0.0, math.cos(pitch)])
+        rotation = np.column_stack([right, up, np.cross(right, up)])
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, rotation.flatten())
+        m.cam_quat[cam] = quat
 
     def _ids(self) -> None:
         m = self.model

@@ -156,3 +156,27 @@ def test_nondeterministic_evaluation_and_settings_mismatch_are_broken():
     assert v.status == 'broken'
     text = ' '.join(v.evidence)
     assert 'not deterministic' in text and 'differ from training' in text
+
+
+def test_the_diagnosed_failure_is_the_final_models_first_then_the_early_checkpoints(tmp_path):
+    import json
+
+    from nav_eval.diagnose import pick_episode
+    from nav_eval.errors import DiagnosisError
+
+    def write(outcomes: dict) -> None:
+        sets = [{'name': name, 'episodes': [{'seed': 201 + i, 'outcome': o}
+                                            for i, o in enumerate(found)]}
+                for name, found in outcomes.items()]
+        (tmp_path / 'results.json').write_text(json.dumps({'sets': sets}))
+
+    ok = ['success'] * 3
+    write({'dqn_heldout': ok, 'dqn_train': ['success', 'success', 'timeout'],
+           'early_heldout': ['collision'] * 3})
+    assert pick_episode(tmp_path, None, None) == ('dqn_train', 203)
+    write({'dqn_heldout': ok, 'dqn_train': ok,
+           'early_heldout': ['success', 'collision', 'timeout']})
+    assert pick_episode(tmp_path, None, None) == ('early_heldout', 202)
+    write({'dqn_heldout': ok, 'dqn_train': ok, 'early_heldout': ok, 'early_train': ok})
+    with pytest.raises(DiagnosisError, match='nothing to diagnose'):
+        pick_episode(tmp_path, None, None)

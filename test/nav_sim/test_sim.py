@@ -41,6 +41,23 @@ def test_render_shape_dtype_and_content(sim):
     assert image.std() > 1.0  # not a blank buffer
 
 
+@pytest.mark.parametrize('mount', [{}, {'camera_mount_forward': 0.0, 'camera_mount_height': 0.1,
+                                         'camera_pitch_deg': 25.0}])
+def test_the_camera_sits_and_looks_where_configured(mount):
+    config = SimConfig(**mount)
+    sim = NavSim(config)
+    try:
+        place(sim, 0.2, -0.1, math.pi / 2, goal=(0.5, 0.0))
+        cam = sim.world.camera_id
+        expected = (0.2, -0.1 + config.camera_mount_forward, config.camera_mount_height)
+        np.testing.assert_allclose(sim.world.data.cam_xpos[cam], expected, atol=1e-9)
+        looking = -sim.world.data.cam_xmat[cam].reshape(3, 3)[:, 2]  # cameras look along -z
+        pitch = math.radians(config.camera_pitch_deg)
+        np.testing.assert_allclose(looking, (0.0, math.cos(pitch), -math.sin(pitch)), atol=1e-9)
+    finally:
+        sim.close()
+
+
 def test_same_seed_gives_bit_identical_first_image():
     a, b = NavSim(), NavSim()
     try:
@@ -65,7 +82,7 @@ def test_camera_looks_forward_and_sees_the_green_goal(sim):
     place(sim, 0.0, 0.0, math.pi / 2, goal=(0.5, 0.0))  # goal is to the robot's right
     right = sim.render().astype(int)
     green = (right[..., 1] > 150) & (right[..., 0] < 100) & (right[..., 2] < 100)
-    assert green.sum() == 0  # 90 degrees off-axis is outside the 48 degree field of view
+    assert green.sum() == 0  # 90 degrees off-axis is outside the (90 degree) field of view
 
 
 def test_each_action_moves_as_named(sim):
@@ -155,21 +172,42 @@ def green_share(image: np.ndarray) -> float:
     return float(((g > 120) & (g - r > 60) & (g - b > 60)).mean())
 
 
-def test_the_goal_stays_visible_up_to_the_success_distance(sim):
+# The e-puck's own mount (front edge, level): the camera ends up ~1 cm from the goal marker at
+# the success radius and ~1 cm from a wall, which is where a wrong near plane shows.
+EPUCK_CAMERA = SimConfig(camera_mount_forward=0.038, camera_mount_height=0.0455,
+                         camera_pitch_deg=0.0)
+
+
+@pytest.fixture
+def epuck_sim():
+    core = NavSim(EPUCK_CAMERA)
+    yield core
+    core.close()
+
+
+def test_the_goal_stays_visible_up_to_the_success_distance(epuck_sim):
     """At the success radius the camera is ~1 cm from the goal marker: it must fill the view
     (MuJoCo's default near plane, relative to the model extent, used to clip it away)."""
     distance = CFG.goal_radius + 0.005  # just outside success
-    place(sim, 0.0, 0.0, 0.0, (distance, 0.0))
-    assert sim.distance > CFG.goal_radius
-    assert green_share(sim.render()) > 0.5
+    place(epuck_sim, 0.0, 0.0, 0.0, (distance, 0.0))
+    assert epuck_sim.distance > CFG.goal_radius
+    assert green_share(epuck_sim.render()) > 0.5
 
 
-def test_a_wall_just_ahead_is_seen(sim):
+def test_the_default_camera_keeps_the_goal_in_view_while_approaching(sim):
+    shares = []
+    for distance in (0.5, 0.3, 0.15, CFG.goal_radius + 0.005):
+        place(sim, 0.0, 0.0, 0.0, (distance, 0.0))
+        shares.append(green_share(sim.render()))
+    assert shares == sorted(shares) and shares[0] > 0.02 and shares[-1] > 0.3, shares
+
+
+def test_a_wall_just_ahead_is_seen(epuck_sim):
     """A wall 2 cm in front of the camera fills the image (no see-through near clipping)."""
     wall_x = 1.0  # inner face of the east wall
-    camera_ahead = 0.038
-    place(sim, wall_x - camera_ahead - 0.02, 0.0, 0.0, (-0.5, 0.0))
-    image = sim.render().astype(int)
+    camera_ahead = EPUCK_CAMERA.camera_mount_forward
+    place(epuck_sim, wall_x - camera_ahead - 0.02, 0.0, 0.0, (-0.5, 0.0))
+    image = epuck_sim.render().astype(int)
     wall = np.array([0.78, 0.76, 0.70]) * 255
     centre = image[20:76, 30:98].reshape(-1, 3)
     assert float(np.mean(np.abs(centre - wall).max(axis=1) < 60)) > 0.9
