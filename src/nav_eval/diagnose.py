@@ -25,6 +25,7 @@ from nav_eval import layers
 from nav_eval.errors import DiagnosisError
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.config import EnvConfig
+from nav_gym.timing import quiet_learner_threads
 from nav_sim.config import SimConfig
 
 # the final model's failures first; if it fails nowhere, the early checkpoint's
@@ -243,6 +244,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--no-rerun', action='store_true',
                         help='skip the determinism re-run of the episode')
     args = parser.parse_args(strip_ros_args(argv))
+    quiet_learner_threads()  # the re-run's forward passes must not spin against the sim
     run_command('nav-eval-diagnose',
                 lambda: run(args.run_dir, args.set_name, args.seed, not args.no_rerun) and 0)
 

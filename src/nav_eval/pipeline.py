@@ -113,7 +113,7 @@ def main(argv: list[str] | None = None) -> None:
                 if (run_dir / 'config.yaml').is_file() else {}
             config = train_config.build(args.config, overrides, base)
         else:
-            config = train_config.build(args.config, overrides)
+            config = train_config.build(args.config, overrides).with_full_sim_params()
             run_dir = new_run_dir(config)
             (run_dir / 'config.yaml').write_text(config.to_yaml())
         print(f'run directory: {run_dir}', flush=True)

@@ -301,8 +301,12 @@ def section_trajectories(run: Run) -> list[str]:
         trace = example[1]
         out, ref = run.figure(f'trajectory_{kind}.png')
         plots.trajectory(trace, arena, out)
-        lines += image(ref, f"{kind.capitalize()}: {trace.get('set')} seed {trace.get('seed')} "
-                       f"({trace.get('outcome')}, {len(trace.get('steps', []))} steps)")
+        caption = (f"{kind.capitalize()}: {trace.get('set')} seed {trace.get('seed')} "
+                   f"({trace.get('outcome')}, {len(trace.get('steps', []))} steps)")
+        if str(trace.get('set', '')).startswith('early'):
+            caption += ("; the final model failed in none of its episodes, so this is the early "
+                        "checkpoint's failure")
+        lines += image(ref, caption)
     # the diagnosis already shows the failure's frames: then show the success's
     order = (success, failed) if (run.diagnosis or {}).get('figures') else (failed, success)
     for path, trace in (e for e in order if e):

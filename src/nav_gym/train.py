@@ -144,6 +144,7 @@ def _buffer_step(path: Path) -> int | None:
 
 def train(config: TrainConfig, run_dir: Path, resume: bool = False) -> dict[str, Any]:
     """Train (or continue) a run; returns the summary it writes."""
+    config = config.with_full_sim_params()
     (run_dir / 'config.yaml').write_text(config.to_yaml())
     env = None
     interrupted = False

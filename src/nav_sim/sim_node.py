@@ -266,8 +266,10 @@ def main(args: list[str] | None = None) -> None:
     rclpy.init(args=args)
     node = None
     try:
-        node = SimNode()
+        # the executor exists before the node is discoverable: a SIGTERM from a client that
+        # has just seen the node must not land in the executor's constructor
         executor = SingleThreadedExecutor()
+        node = SimNode()
         executor.add_node(node)
         if node.settings.mode == 'lockstep':
             spin_lockstep(node, executor)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
 import signal
@@ -15,7 +16,8 @@ from ament_index_python.packages import get_package_prefix
 
 from nav_gym.errors import CheckpointError, TrainConfigError
 from nav_gym.train import checkpoints, load_model
-from nav_gym.train_config import build
+from nav_gym.train_config import TrainConfig, build, load_yaml
+from nav_sim.config import SimConfig
 
 SMOKE = ['--total-timesteps', '300', '--learning-starts', '100', '--checkpoint-freq', '150',
          '--buffer-size', '1000', '--sim', 'embedded']
@@ -77,6 +79,9 @@ def test_smoke_training_checkpoints_resumes_and_loads(tmp_path):
     summary = json.loads((run_dir / 'summary.json').read_text())
     assert summary['num_timesteps'] == 300 and 0 < summary['env_share'] < 1
     assert summary['config']['learning_rate'] == 1e-4 and summary['config']['seed'] == 9
+    # the run keeps every sim parameter it was trained with, not just the overridden ones
+    saved = load_yaml(run_dir / 'config.yaml')['sim_params']
+    assert saved == dataclasses.asdict(SimConfig())
     # the learner's OpenMP threads wait passively (see nav_gym.timing) unless the user chose
     assert summary['omp_wait_policy'] == os.environ.get('OMP_WAIT_POLICY', 'PASSIVE')
 
@@ -162,3 +167,14 @@ def test_learner_threads_wait_passively_unless_the_user_chose(preset, expected):
                          timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == [expected, expected]
+
+
+def test_a_run_config_spells_out_every_sim_parameter():
+    config = TrainConfig(sim_params={'camera_pitch_deg': 10, 'publish_clock': True})
+    full = config.with_full_sim_params().sim_params
+    assert full == {**dataclasses.asdict(SimConfig(camera_pitch_deg=10.0)),
+                    'publish_clock': True}
+    with pytest.raises(TrainConfigError, match='bogus'):
+        TrainConfig(sim_params={'bogus': 1}).with_full_sim_params()
+    with pytest.raises(TrainConfigError, match='sim_dt'):
+        TrainConfig(sim_params={'sim_dt': 'fast'}).with_full_sim_params()

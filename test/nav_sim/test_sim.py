@@ -41,8 +41,11 @@ def test_render_shape_dtype_and_content(sim):
     assert image.std() > 1.0  # not a blank buffer
 
 
-@pytest.mark.parametrize('mount', [{}, {'camera_mount_forward': 0.0, 'camera_mount_height': 0.1,
-                                         'camera_pitch_deg': 25.0}])
+@pytest.mark.parametrize('mount', [
+    {},
+    {'camera_mount_forward': 0.038, 'camera_mount_height': 0.0455, 'camera_pitch_deg': 0.0},
+    {'camera_mount_forward': -0.02, 'camera_mount_height': 0.2, 'camera_pitch_deg': -10.0},
+])
 def test_the_camera_sits_and_looks_where_configured(mount):
     config = SimConfig(**mount)
     sim = NavSim(config)
@@ -54,6 +57,9 @@ def test_the_camera_sits_and_looks_where_configured(mount):
         looking = -sim.world.data.cam_xmat[cam].reshape(3, 3)[:, 2]  # cameras look along -z
         pitch = math.radians(config.camera_pitch_deg)
         np.testing.assert_allclose(looking, (0.0, math.cos(pitch), -math.sin(pitch)), atol=1e-9)
+        # no roll: the image's right is the robot's right (-y of the body = +x of the world here)
+        np.testing.assert_allclose(sim.world.data.cam_xmat[cam].reshape(3, 3)[:, 0],
+                                   (1.0, 0.0, 0.0), atol=1e-9)
     finally:
         sim.close()
 
