@@ -217,8 +217,7 @@ def run(run_dir: Path, set_name: str | None = None, seed: int | None = None,
     trace, frames = load_episode(eval_dir, set_name, seed)
     config = run_config(run_dir)
     env = config.env_config()
-    names = set(SimConfig.__dataclass_fields__)
-    sim = SimConfig.from_dict({k: v for k, v in config.sim_params.items() if k in names})
+    sim = SimConfig.from_params(config.sim_params)
     results = json.loads((eval_dir / 'results.json').read_text())
     run_values = {'sim_params': config.sim_params, 'forward_speed': config.forward_speed,
                   'turn_rate': config.turn_rate, 'turn_speed': config.turn_speed,

@@ -159,8 +159,7 @@ def _recorded(recorder: Any, stamp_ns: int, timeout: float = 5.0) -> None:
 def arena_description(sim_params: dict[str, Any]) -> dict[str, Any]:
     """Arena geometry for top-down plots (loads the MJCF; renders nothing)."""
     from nav_sim.world import World
-    names = {f for f in SimConfig.__dataclass_fields__}
-    config = SimConfig.from_dict({k: v for k, v in sim_params.items() if k in names})
+    config = SimConfig.from_params(sim_params)
     world = World(config)
     g = world.geometry
     return {'half_size': g.half_size, 'robot_radius': g.robot_radius,

@@ -24,8 +24,8 @@ from nav_gym.checks import run_checklist
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.config import EnvConfig
 from nav_gym.env import NavigationEnv
-from nav_gym.train import new_run_dir, train
 from nav_gym.timing import quiet_learner_threads
+from nav_gym.train import new_run_dir, train
 from nav_gym.train_config import TrainConfig
 from nav_gym.validate import format_checklist
 

@@ -13,8 +13,9 @@ import yaml
 
 from nav_gym.config import EnvConfig
 from nav_gym.errors import TrainConfigError
-from nav_sim.config import NodeConfig, SimConfig
+from nav_sim.config import SimConfig
 from nav_sim.errors import ConfigError
+from nav_sim.launch import typed_params
 
 
 def _f(default: Any, help: str) -> Any:
@@ -89,20 +90,14 @@ class TrainConfig:
 
         A run saves this, so what it was trained on does not change when a default changes
         later (evaluation, diagnosis and resume all read the run's config).  Node parameters
-        in ``sim_params`` (e.g. ``publish_clock``) are kept as given.
+        in ``sim_params`` (e.g. ``publish_clock``) are kept, converted to their declared types.
         """
-        names = {f.name for f in dataclasses.fields(SimConfig)}
-        unknown = sorted(set(self.sim_params) - names
-                         - {f.name for f in dataclasses.fields(NodeConfig)})
-        if unknown:
-            raise TrainConfigError(f'sim_params: unknown sim_node parameter(s) {unknown}; see '
-                                   'config/sim.yaml')
         try:
-            sim = SimConfig.from_dict({k: v for k, v in self.sim_params.items() if k in names})
+            params = typed_params(self.sim_params)  # known names, declared types
+            sim = SimConfig.from_params(params)
         except ConfigError as exc:
             raise TrainConfigError(f'sim_params: {exc}') from exc
-        others = {k: v for k, v in self.sim_params.items() if k not in names}
-        return dataclasses.replace(self, sim_params={**dataclasses.asdict(sim), **others})
+        return dataclasses.replace(self, sim_params={**params, **dataclasses.asdict(sim)})
 
     def to_yaml(self) -> str:
         return yaml.safe_dump(dataclasses.asdict(self), sort_keys=False)

@@ -113,6 +113,13 @@ class SimConfig:
                 raise ConfigError(f'{key}: cannot convert {value!r} to {kind.__name__}') from exc
         return cls(**converted)
 
+    @classmethod
+    def from_params(cls, params: dict[str, Any]) -> SimConfig:
+        """The simulation part of a sim_node parameter mapping (node parameters such as
+        ``publish_clock`` are left out); bad simulation values raise ConfigError."""
+        names = {f.name for f in dataclasses.fields(cls)}
+        return cls.from_dict({k: v for k, v in params.items() if k in names})
+
 
 def normalise_split(split: str) -> str:
     """Return the canonical split name ('train' or 'heldout') or raise ScenarioError."""
