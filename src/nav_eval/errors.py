@@ -15,3 +15,7 @@ class EvaluationError(NavEvalError, RuntimeError):
 
 class DiagnosisError(NavEvalError, RuntimeError):
     """A failure diagnosis cannot run: no such episode, or no trace/bag to read."""
+
+
+class RecordingError(NavEvalError, RuntimeError):
+    """A bag cannot be written (target exists, writer failure) or the recording failed."""

@@ -150,7 +150,7 @@ def run_episode(env: NavigationEnv, policy: Policy, seed: int, split: str,
 def _recorded(recorder: Any, stamp_ns: int, timeout: float = 5.0) -> None:
     """Lockstep with the recorder: the sim publishes with depth 1, so wait until the period's
     messages are in the bag before the next command; a loss is reported, never silent."""
-    from nav_eval.recording import PERIOD_TOPICS
+    from nav_eval.bags import PERIOD_TOPICS
     if not recorder.wait_for(stamp_ns, timeout, PERIOD_TOPICS):
         print(f'warning: the bag misses messages of the period stamped {stamp_ns} ns',
               flush=True)
@@ -203,7 +203,7 @@ def evaluate_set(env: NavigationEnv, run_dir: Path, eval_set: EvalSet, out: Path
 
 def _open_recorder(path: Path, env: NavigationEnv, timeout: float = 10.0) -> Any:
     """A bag recorder on the env's sim, matched with it before the first reset is published."""
-    from nav_eval.recording import BagRecorder
+    from nav_eval.bag_recorder import BagRecorder
     if path.exists():
         import shutil
         shutil.rmtree(path)  # a re-run replaces the bag of the same set

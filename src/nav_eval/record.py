@@ -1,6 +1,6 @@
 """``ros2 run nav_eval record OUTPUT_DIR``: record a running nav_sim graph into an MCAP bag.
 
-Records the nav_sim topics of one namespace (see :mod:`nav_eval.recording`) until Ctrl-C,
+Records the nav_sim topics of one namespace (see :mod:`nav_eval.bag_recorder`) until Ctrl-C,
 SIGTERM or ``--duration`` seconds, then finishes the bag and prints the messages per topic.
 Works with any driver, e.g. a realtime-mode sim teleoperated with ``ros2 topic pub cmd_vel``.
 A ``--ros-args ...`` block (``ros2 run`` may pass one) is accepted and ignored: use
@@ -16,7 +16,8 @@ import time
 from collections.abc import Sequence
 from types import FrameType
 
-from nav_eval.recording import BagRecorder, RecordingError
+from nav_eval.bag_recorder import BagRecorder
+from nav_eval.errors import RecordingError
 
 PROG = 'nav-eval-record'
 TICK_S = 0.1

@@ -22,7 +22,7 @@ from nav_gym.observation import OBS_SHAPE, image_msg_to_observation
 from nav_sim.client import Frame, SimClient
 from nav_sim.config import normalise_split
 from nav_sim.errors import FrameSyncError, SimUnavailableError
-from nav_sim.launch import SimProcess
+from nav_sim.sim_process import SimProcess
 
 ACTION_NAMES = ('left', 'forward', 'right')
 _instances = itertools.count()

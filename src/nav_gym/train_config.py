@@ -15,7 +15,7 @@ from nav_gym.config import EnvConfig
 from nav_gym.errors import TrainConfigError
 from nav_sim.config import SimConfig
 from nav_sim.errors import ConfigError
-from nav_sim.launch import typed_params
+from nav_sim.sim_process import typed_params
 
 
 def _f(default: Any, help: str) -> Any:

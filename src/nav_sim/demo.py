@@ -13,7 +13,7 @@ import sys
 
 from nav_sim.client import SimClient
 from nav_sim.errors import NavSimError
-from nav_sim.launch import SimProcess
+from nav_sim.sim_process import SimProcess
 
 FORWARD, LEFT, RIGHT = (0.12, 0.0), (0.0, 1.5), (0.0, -1.5)
 SCRIPT = [('forward', FORWARD)] * 6 + [('left', LEFT)] * 4 + [('forward', FORWARD)] * 6 + \

@@ -109,7 +109,7 @@ def test_results_files_and_metrics(run_dir, evaluated):
 
 
 def test_every_set_is_recorded_as_an_mcap_bag(run_dir, evaluated):
-    from nav_eval.recording import episodes_in_bag, read_bag
+    from nav_eval.bags import episodes_in_bag, read_bag
     bag = run_dir / 'eval' / 'bags' / 'dqn_heldout'
     assert 'mcap' in (bag / 'metadata.yaml').read_text()
     annotations = episodes_in_bag(bag)

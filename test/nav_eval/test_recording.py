@@ -24,22 +24,21 @@ from rclpy.signals import SignalHandlerOptions
 from rosbags.typesys import Stores, get_typestore
 from rosgraph_msgs.msg import Clock
 
-from nav_eval.record import format_counts, strip_ros_args
-from nav_eval.recording import (
+from nav_eval.bag_recorder import BagRecorder, bag_qos
+from nav_eval.bags import (
     EPISODE_TOPIC,
     PERIOD_TOPICS,
     SIM_TOPICS,
-    BagRecorder,
-    RecordingError,
-    bag_qos,
     cdr_stamp_ns,
     episode_events,
     episodes_in_bag,
     read_bag,
 )
+from nav_eval.errors import RecordingError
+from nav_eval.record import format_counts, strip_ros_args
 from nav_sim import qos
 from nav_sim.client import SimClient
-from nav_sim.launch import SimProcess
+from nav_sim.sim_process import SimProcess
 
 STEPS = 10
 WARM_UP_S = 1.5

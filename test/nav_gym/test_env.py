@@ -15,7 +15,7 @@ from nav_gym.config import EnvConfig
 from nav_gym.env import NavigationEnv, reward_terms
 from nav_gym.errors import InvalidActionError, ResetNeededError
 from nav_sim.errors import ScenarioError, SimUnavailableError
-from nav_sim.launch import SimProcess
+from nav_sim.sim_process import SimProcess
 
 
 def test_registered_with_gymnasium():

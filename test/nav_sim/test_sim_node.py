@@ -20,7 +20,7 @@ from nav_sim import qos
 from nav_sim.client import SimClient
 from nav_sim.config import SimConfig
 from nav_sim.errors import ScenarioError
-from nav_sim.launch import ros_args
+from nav_sim.sim_process import ros_args
 
 CFG = SimConfig()
 PERIOD_NS = CFG.action_repeat * round(CFG.sim_dt * 1e9)

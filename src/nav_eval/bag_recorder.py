@@ -27,18 +27,7 @@ milliseconds later, and what it publishes before then never reaches the bag.  Be
 must be complete, reset and step until :meth:`BagRecorder.wait_for` sees a whole control period
 (``topics=PERIOD_TOPICS``).
 
-Finding episodes in a bag:
-
-* ``/visnav/episode``: one JSON annotation per finished episode (set, policy, checkpoint, seed,
-  split, outcome, length, return, ...), written by the evaluation at the stamp of the episode's
-  last frame; :func:`episodes_in_bag` returns them in order.  The always-absolute topic name keeps
-  them in one place whatever namespace the sim ran in.
-* ``<ns>/episode_event``: one DiagnosticArray per control period (status ``nav_sim/episode``, see
-  :mod:`nav_sim.ros_msgs`).  Its message is ``reset`` on an episode's first frame (key/values
-  ``episode``, ``seed``, ``split``), ``goal`` or ``collision`` on a terminal frame (``done`` is
-  True) and ``none`` otherwise.  Every message of one control period shares the stamp, so the
-  messages from one ``reset`` stamp up to (not including) the next belong to one episode;
-  :func:`episode_events` returns the parsed events.
+Reading a bag back (episodes, events, messages) is :mod:`nav_eval.bags`, which needs no rclpy.
 """
 
 from __future__ import annotations
@@ -46,7 +35,6 @@ from __future__ import annotations
 import json
 import logging
 import shutil
-import struct
 import threading
 import time
 from collections.abc import Iterable, Mapping
@@ -73,30 +61,30 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
-from rosbags.rosbag2 import Reader, StoragePlugin, Writer, WriterError
-from rosbags.typesys import Stores, get_typestore
+from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 
-from nav_eval.errors import NavEvalError
-from nav_sim import qos, ros_msgs
+from nav_eval.bags import (
+    BAG_VERSION,
+    EPISODE_TOPIC,
+    IMAGE_TOPIC,
+    SIM_TOPICS,
+    STRING_TYPE,
+    TYPESTORE,
+    cdr_stamp_ns,
+)
+from nav_eval.errors import RecordingError
+from nav_sim import qos
 
 _log = logging.getLogger(__name__)
 
-BAG_VERSION = 9            # the rosbag2 metadata version ROS 2 Jazzy writes
 QUEUE_DEPTH = 50           # subscriber queue: a briefly slow recorder loses nothing
 SPIN_TIMEOUT_S = 0.1       # how soon the recording thread notices close()
 DRAIN_S = 0.5              # at close, write what already arrived for at most this long
 HOLD_S = 10.0              # unstamped messages wait this long for a first sim stamp ...
 HOLD_MAX = 1000            # ... or until this many are waiting
 POLL_S = 0.02
-IMAGE_TOPIC = 'camera/image_raw'
-EPISODE_TOPIC = '/visnav/episode'
-STRING_TYPE = 'std_msgs/msg/String'
-
-
-class RecordingError(NavEvalError, RuntimeError):
-    """A bag cannot be written (target exists, writer failure) or the recording failed."""
 
 
 @dataclass(frozen=True)
@@ -121,24 +109,6 @@ TOPICS = (
     RecordedTopic('cmd_vel', 'geometry_msgs/msg/Twist', Twist, qos.CONTROL, False),
     RecordedTopic('/clock', 'rosgraph_msgs/msg/Clock', Clock, qos.CLOCK, True),
 )
-#: what nav_sim publishes every control period (and ``/clock`` with ``publish_clock``)
-PERIOD_TOPICS = (IMAGE_TOPIC, 'camera/camera_info', 'odom', 'episode_event')
-#: topics every nav_sim node publishes
-SIM_TOPICS = (*PERIOD_TOPICS, 'goal_pose')
-
-_typestore = get_typestore(Stores.ROS2_JAZZY)
-
-
-def cdr_stamp_ns(data: bytes | memoryview) -> int | None:
-    """The builtin_interfaces/Time a CDR message starts with (header stamp, Clock), in ns.
-
-    Reads 8 bytes after the 4-byte encapsulation header instead of deserializing the message;
-    None if ``data`` is too short to hold one.
-    """
-    if len(data) < 12:
-        return None
-    sec, nanosec = struct.unpack_from('<iI' if data[1] & 1 else '>iI', data, 4)
-    return sec * 1_000_000_000 + nanosec
 
 
 def bag_qos(profile: QoSProfile) -> Qos:
@@ -226,7 +196,7 @@ class BagRecorder:
 
     def _add_connection(self, topic: str, msgtype: str, profiles: list[Qos]) -> Connection:
         assert self._writer is not None
-        connection = self._writer.add_connection(topic, msgtype, typestore=_typestore,
+        connection = self._writer.add_connection(topic, msgtype, typestore=TYPESTORE,
                                                  offered_qos_profiles=profiles)
         self._counts[topic] = 0
         return connection
@@ -358,7 +328,7 @@ class BagRecorder:
         carries the stamp of the episode's last frame.
         """
         text = json.dumps(dict(info), default=_json_value)
-        data = _typestore.serialize_cdr(_typestore.types[STRING_TYPE](data=text), STRING_TYPE)
+        data = TYPESTORE.serialize_cdr(TYPESTORE.types[STRING_TYPE](data=text), STRING_TYPE)
         with self._cond:
             if self._writer is None:
                 raise RecordingError(f'cannot annotate {self.path}: the recorder is closed')
@@ -404,45 +374,3 @@ class BagRecorder:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-# --- reading ------------------------------------------------------------------------------
-def read_bag(path: str | Path, topics: Iterable[str] | None = None
-             ) -> dict[str, list[tuple[int, Any]]]:
-    """Every message of a bag (or of ``topics``) as (timestamp_ns, message) lists per topic.
-
-    Messages are rosbags dataclasses with the field names of the ROS 2 messages.
-    """
-    wanted = None if topics is None else set(topics)
-    with Reader(path) as reader:
-        connections = [c for c in reader.connections if wanted is None or c.topic in wanted]
-        out: dict[str, list[tuple[int, Any]]] = {c.topic: [] for c in connections}
-        for connection, timestamp, raw in (reader.messages(connections=connections)
-                                           if connections else ()):
-            out[connection.topic].append(
-                (timestamp, _typestore.deserialize_cdr(raw, connection.msgtype)))
-    return out
-
-
-def episodes_in_bag(path: str | Path) -> list[dict[str, Any]]:
-    """The ``/visnav/episode`` annotations of a bag, parsed from JSON, in recording order."""
-    messages = read_bag(path, [EPISODE_TOPIC]).get(EPISODE_TOPIC, [])
-    return [json.loads(msg.data) for _, msg in messages]
-
-
-def episode_events(path: str | Path) -> list[tuple[int, dict[str, Any]]]:
-    """(timestamp_ns, event dict) of every ``*/episode_event`` message, in time order.
-
-    The dicts are :func:`nav_sim.ros_msgs.parse_event`'s: ``event`` (``reset``, ``none``,
-    ``goal``, ``collision``) plus ``topic`` and the counters (``episode``, ``seed``, ...).
-    """
-    with Reader(path) as reader:
-        topics = [c.topic for c in reader.connections if c.topic.endswith('/episode_event')]
-    events = []
-    for topic, messages in read_bag(path, topics).items():
-        for timestamp, msg in messages:
-            event = ros_msgs.parse_event(msg)
-            if event is not None:
-                events.append((timestamp, {**event, 'topic': topic}))
-    events.sort(key=lambda item: item[0])
-    return events
