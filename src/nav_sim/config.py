@@ -19,6 +19,58 @@ SPLIT_ALIASES = {'train': 'train', 'training': 'train', 'heldout': 'heldout',
                  'held-out': 'heldout', 'held_out': 'heldout', 'test': 'heldout'}
 
 
+_TYPE_WORDS = {bool: 'true or false', int: 'an integer', float: 'a number', str: 'a string'}
+
+
+def convert(name: str, kind: type, value: Any) -> Any:
+    """Return ``value`` as the declared type ``kind`` of the setting ``name``, or raise ConfigError.
+
+    The one conversion of every setting, whether it comes from a ROS parameter, a YAML file or
+    the command line (where every value is a string).  It never loses information:
+    ``bool`` takes ``True``/``False`` or the strings ``true``/``false`` (any case); ``int``
+    takes an integer, or a float or string with an integral value (``4``, ``4.0``, ``'4.0'``),
+    never ``3.7``; ``float`` takes an int, a float or a numeric string; ``str`` takes a string.
+    A bool is never taken as a number.
+    """
+    word = _TYPE_WORDS.get(kind, kind.__name__)
+    error = ConfigError(f'{name} takes {word}, got {value!r}')
+    if kind is bool:
+        if isinstance(value, bool):
+            return value
+        if isinstance(value, str) and value.strip().lower() in ('true', 'false'):
+            return value.strip().lower() == 'true'
+        raise error
+    if kind is str:
+        if isinstance(value, str):
+            return value
+        raise error
+    if kind not in (int, float):
+        if isinstance(value, kind):
+            return value
+        raise error
+    if isinstance(value, bool):
+        raise error
+    if isinstance(value, str):
+        try:
+            number: Any = int(value.strip()) if kind is int else float(value)
+        except ValueError:
+            try:
+                number = float(value)
+            except ValueError:
+                raise error from None
+    elif isinstance(value, numbers.Real):
+        number = value
+    else:
+        raise error
+    if kind is float:
+        return float(number)
+    if isinstance(number, numbers.Integral):
+        return int(number)
+    if math.isfinite(number) and float(number).is_integer():
+        return int(number)
+    raise error
+
+
 def _f(default: Any, help: str) -> Any:
     return field(default=default, metadata={'help': help})
 
