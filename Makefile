@@ -14,17 +14,23 @@ export AMENT_PREFIX_PATH := $(abspath $(VENV))
 export ROS_AUTOMATIC_DISCOVERY_RANGE ?= LOCALHOST
 export MUJOCO_GL ?= egl
 
-.PHONY: run test test-slow setup system-deps lint bench demo clean
+.PHONY: run test test-slow setup system-deps lint bench demo clean sweep
 
 # the main job: validate the env -> train 50k steps -> evaluate -> diagnose -> report (runs/)
 run: setup
 	$(VENV)/bin/visnav-pipeline $(ARGS)
 
-# start the sim node as `ros2 run nav_sim sim_node` would and drive one scripted episode
-demo: setup
-	$(VENV)/bin/nav-sim-demo
+# seeds 1-5 of the defaults (or a grid) on Ray Tune -> runs/sweep_<date>_<time>/Sweep.md
+sweep: setup
+	$(VENV)/bin/visnav-sweep $(ARGS)
 
-test: setup
+# start the sim node as `ros2 run nav_sim sim_node` would and drive one scripted episode;
+# `make demo ARGS=--live` serves it to Foxglove at ws://localhost:8765, at wall-clock pace
+demo: setup
+	$(VENV)/bin/nav-sim-demo $(ARGS)
+
+# CI runs this: lint first (ruff: style, quotes, pep257 docstrings), then the tests
+test: lint
 	$(PY) -m pytest -q
 
 test-slow: setup
@@ -33,6 +39,7 @@ test-slow: setup
 bench: setup
 	$(PY) benchmarks/bench_sim.py
 	$(PY) benchmarks/bench_env.py
+	$(PY) benchmarks/bench_live.py
 
 lint: setup
 	$(VENV)/bin/ruff check src test benchmarks

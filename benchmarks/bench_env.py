@@ -1,5 +1,6 @@
-"""Env steps/s through the ROS wrapper vs. the sim core in process, and the env's share of DQN
-training time, measured side by side in one run.
+"""Env steps/s through ROS vs. in process, and DQN wall-clock by OpenMP wait policy.
+
+Measured side by side in one run.
 
     .venv/bin/python benchmarks/bench_env.py [--steps 2000] [--dqn-steps 4000]
 
@@ -10,9 +11,10 @@ training time, measured side by side in one run.
 2. A short DQN('CnnPolicy') run with the workshop settings (learning starts after
    ``--learning-starts`` steps) through the ROS env: the share of wall-clock time spent inside
    ``env.step``/``env.reset`` against the learner.  Target: under 20% on a 2-core machine.
-   It runs twice, each in a child process because OpenMP reads its settings once: with the
-   passive OpenMP waits that training uses (``nav_gym.timing.quiet_learner_threads``) and with
-   libgomp's default spinning waits, for comparison.
+   It runs ``--dqn-repeats`` times alternating, each in a child process because OpenMP reads
+   its settings once: with passive OpenMP waits (``OMP_WAIT_POLICY=PASSIVE``) and with
+   libgomp's default waits.  Wall-clock time decides which is faster (training's default,
+   see ``nav_gym.timing.quiet_learner_threads``); the env share is a diagnostic.
 """
 
 from __future__ import annotations
@@ -33,16 +35,17 @@ import numpy as np  # noqa: E402
 from nav_gym.config import EnvConfig  # noqa: E402
 from nav_gym.env import NavigationEnv, reward_terms  # noqa: E402
 from nav_gym.observation import rgb_to_observation  # noqa: E402
-from nav_gym.timing import EnvTimer, quiet_learner_threads  # noqa: E402
+from nav_gym.timing import EnvTimer  # noqa: E402
 from nav_sim.sim import NavSim, twist_to_wheels  # noqa: E402
 
 
 def actions(n: int) -> np.ndarray:
+    """Return the seeded random action sequence both loops use."""
     return np.random.default_rng(0).integers(0, 3, size=n)
 
 
 def in_process(steps: int, config: EnvConfig) -> float:
-    """The env's work without ROS: NavSim + observation + reward, resets at episode ends."""
+    """Return steps/s of the env's work without ROS (NavSim, observation, reward, resets)."""
     sim = NavSim()
     speeds = {0: (config.turn_speed, config.turn_rate), 1: (config.forward_speed, 0.0),
               2: (config.turn_speed, -config.turn_rate)}  # as NavigationEnv maps its actions
@@ -69,6 +72,7 @@ def in_process(steps: int, config: EnvConfig) -> float:
 
 
 def through_ros(steps: int, config: EnvConfig) -> float:
+    """Return steps/s of NavigationEnv through the nav_sim node."""
     env = NavigationEnv(config)
     try:
         env.reset(seed=0)
@@ -107,15 +111,16 @@ def dqn_share(steps: int, learning_starts: int, config: EnvConfig
 def dqn_share_child(args: argparse.Namespace, passive: bool) -> dict[str, float]:
     """Run ``dqn_share`` in a fresh interpreter (OpenMP reads OMP_WAIT_POLICY once)."""
     env = {k: v for k, v in os.environ.items() if k != 'OMP_WAIT_POLICY'}
+    if passive:
+        env['OMP_WAIT_POLICY'] = 'PASSIVE'
     command = [sys.executable, __file__, '--dqn-only', '--dqn-steps', str(args.dqn_steps),
                '--learning-starts', str(args.learning_starts)]
-    if not passive:
-        command.append('--spinning-threads')
     out = subprocess.run(command, env=env, check=True, capture_output=True, text=True).stdout
     return json.loads(out.strip().splitlines()[-1])
 
 
 def report_dqn(label: str, r: dict[str, float], steps: int, learning_starts: int) -> None:
+    """Print one DQN run's wall-clock time, steps/s and env share."""
     env_per_step = r['env_s'] / steps
     # the rest of the wall time is the learner and SB3's bookkeeping (charged here to the
     # learning steps, which favours the env a little): extrapolate to 50k steps / 2k starts
@@ -130,22 +135,48 @@ def report_dqn(label: str, r: dict[str, float], steps: int, learning_starts: int
 
 
 def main() -> None:
+    """Run the benchmark and print its figures."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--steps', type=int, default=2000)
     parser.add_argument('--repeats', type=int, default=2, help='alternating runs; best kept')
     parser.add_argument('--dqn-steps', type=int, default=4000)
     parser.add_argument('--learning-starts', type=int, default=160,
-                        help='4%% of the steps, as 2,000 of the workshop\'s 50,000')
+                        help="4%% of the steps, as 2,000 of the workshop's 50,000")
+    parser.add_argument('--dqn-repeats', type=int, default=3,
+                        help='alternating DQN runs per OpenMP wait policy')
+    parser.add_argument('--dqn-comparison-only', action='store_true',
+                        help='skip the env steps/s measurement')
     parser.add_argument('--dqn-only', action='store_true', help=argparse.SUPPRESS)
-    parser.add_argument('--spinning-threads', action='store_true', help=argparse.SUPPRESS)
     args = parser.parse_args()
     config = EnvConfig(sim='embedded')
-    if args.dqn_only:  # child process: one DQN measurement as JSON
-        if not args.spinning_threads:
-            quiet_learner_threads()
+    if args.dqn_only:  # child process: one DQN measurement as JSON (policy from the parent)
         env_s, wall, _, share = dqn_share(args.dqn_steps, args.learning_starts, config)
         print(json.dumps({'env_s': env_s, 'wall': wall, 'share': share}))
         return
+    if not args.dqn_comparison_only:
+        report_env(args, config)
+    print(f'DQN CnnPolicy, {args.dqn_steps} steps ({args.learning_starts} before learning '
+          f'starts), through the ROS env, {args.dqn_repeats} alternating runs per policy:')
+    runs: dict[str, list[dict[str, float]]] = {'passive': [], 'default': []}
+    for _ in range(args.dqn_repeats):
+        runs['passive'].append(dqn_share_child(args, passive=True))
+        runs['default'].append(dqn_share_child(args, passive=False))
+    for label, results in runs.items():
+        walls = [r['wall'] for r in results]
+        for r in results:
+            report_dqn(f'OpenMP {label} waits', r, args.dqn_steps, args.learning_starts)
+        print(f'  {label}: wall-clock mean {np.mean(walls):.1f} s, range {min(walls):.1f}-'
+              f'{max(walls):.1f} s, env share mean '
+              f"{np.mean([r['share'] for r in results]):.1%}")
+    passive = [r['wall'] for r in runs['passive']]
+    default = [r['wall'] for r in runs['default']]
+    overlap = max(min(passive), min(default)) <= min(max(passive), max(default))
+    print(f'  wall-clock passive / default (means): {np.mean(passive) / np.mean(default):6.1%}'
+          f"; ranges {'overlap: within the noise' if overlap else 'do not overlap'}")
+
+
+def report_env(args: argparse.Namespace, config: EnvConfig) -> None:
+    """Print env steps/s through ROS against the same work in process."""
     core, ros = [], []
     for _ in range(args.repeats):
         core.append(in_process(args.steps, config))
@@ -158,16 +189,6 @@ def main() -> None:
     print(f'  NavigationEnv through the nav_sim node:       {best_ros:7.0f} /s  '
           f'runs: {[round(v) for v in ros]}')
     print(f'  ratio ROS env / in process:                   {best_ros / best_core:7.1%}')
-    print(f'DQN CnnPolicy, {args.dqn_steps} steps ({args.learning_starts} before learning '
-          'starts), through the ROS env:')
-    passive = dqn_share_child(args, passive=True)
-    spinning = dqn_share_child(args, passive=False)
-    report_dqn('OpenMP passive waits (as training)', passive, args.dqn_steps,
-               args.learning_starts)
-    report_dqn('OpenMP default spinning waits    ', spinning, args.dqn_steps,
-               args.learning_starts)
-    print(f'  wall-clock passive / spinning: {passive["wall"] / spinning["wall"]:6.1%}')
-
 
 if __name__ == '__main__':
     main()

@@ -6,6 +6,9 @@ Both loops do the same work per control period: one wheel command for ``action_r
 steps with goal/collision checks, then one camera render.  The ROS loop adds: publish
 ``cmd_vel`` -> sim node steps, renders, publishes image + event -> client receives both.
 Target: the round trip reaches at least 60% of the in-process rate.
+
+Also the CPU an idle lockstep sim uses (no client; target < 1 % of a core): its CPU time from
+``/proc/PID/stat`` over ``--idle-seconds`` of idling.
 """
 
 from __future__ import annotations
@@ -14,6 +17,7 @@ import argparse
 import os
 import sys
 import time
+from pathlib import Path
 
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
@@ -27,6 +31,7 @@ TURN = (0.0, 1.0)  # turning in place: the episode never ends, every period does
 
 
 def in_process(periods: int) -> float:
+    """Control periods per second of the sim core stepped and rendered in this process."""
     sim = NavSim()
     try:
         sim.reset(101, 'train')
@@ -44,6 +49,7 @@ def in_process(periods: int) -> float:
 
 
 def through_ros(periods: int) -> float:
+    """Control periods per second of lockstep round trips through a sim_node process."""
     namespace = f'/bench_{os.getpid()}'
     with SimProcess(namespace=namespace, params={'publish_clock': False}), \
             SimClient(namespace, timeout=30.0, node_name='bench_client') as client:
@@ -57,10 +63,30 @@ def through_ros(periods: int) -> float:
         return periods / (time.perf_counter() - start)
 
 
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process so far (Linux ``/proc/PID/stat``)."""
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def idle_cpu(seconds: float) -> float:
+    """Share of a core a lockstep sim with no client uses over ``seconds``."""
+    namespace = f'/bench_idle_{os.getpid()}'
+    with SimProcess(namespace=namespace, params={'publish_clock': False}) as sim:
+        with SimClient(namespace, timeout=30.0, node_name='bench_idle_client') as client:
+            client.wait_for_sim(abort=sim.failure, started=sim.ready)
+        before, start = cpu_seconds(sim.process.pid), time.monotonic()
+        time.sleep(seconds)
+        return (cpu_seconds(sim.process.pid) - before) / (time.monotonic() - start)
+
+
 def main() -> None:
+    """Measure both rates in alternating runs, then the idle sim's CPU; print them."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--periods', type=int, default=2000)
     parser.add_argument('--repeats', type=int, default=3, help='alternating runs; best kept')
+    parser.add_argument('--idle-seconds', type=float, default=5.0,
+                        help='how long the idle sim is measured')
     args = parser.parse_args()
     core, ros = [], []
     for _ in range(args.repeats):
@@ -75,6 +101,9 @@ def main() -> None:
     ratio = best_ros / best_core
     print(f'  ratio round trip / in process:          {ratio:8.1%}  (target >= 60%: '
           f"{'met' if ratio >= 0.6 else 'NOT met'})")
+    idle = idle_cpu(args.idle_seconds)
+    print(f'  idle lockstep sim, no client:           {idle:8.2%} of a core over '
+          f"{args.idle_seconds:g} s  (target < 1%: {'met' if idle < 0.01 else 'NOT met'})")
 
 
 if __name__ == '__main__':

@@ -61,7 +61,7 @@ from rosbags.interfaces import (
     QosReliability,
     QosTime,
 )
-from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer, WriterError
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 
@@ -85,6 +85,7 @@ DRAIN_S = 0.5              # at close, write what already arrived for at most th
 HOLD_S = 10.0              # unstamped messages wait this long for a first sim stamp ...
 HOLD_MAX = 1000            # ... or until this many are waiting
 POLL_S = 0.02
+_NEVER = 2**63            # the start stamp of a paused recorder
 
 
 @dataclass(frozen=True)
@@ -112,7 +113,7 @@ TOPICS = (
 
 
 def bag_qos(profile: QoSProfile) -> Qos:
-    """The rosbags form of an rclpy QoS profile (durations left at the default)."""
+    """Return the rosbags form of an rclpy QoS profile (durations left at the default)."""
     default = QosTime(0, 0)
     return Qos(QosHistory(profile.history.value), profile.depth,
                QosReliability(profile.reliability.value), QosDurability(profile.durability.value),
@@ -120,7 +121,7 @@ def bag_qos(profile: QoSProfile) -> Qos:
 
 
 def _json_value(value: Any) -> Any:
-    """numpy scalars and arrays as plain Python values, for ``json.dumps``."""
+    """Numpy scalars and arrays as plain Python values, for ``json.dumps``."""
     for method in ('tolist', 'item'):
         if hasattr(value, method):
             return getattr(value, method)()
@@ -135,8 +136,19 @@ class BagRecorder:
     """
 
     def __init__(self, path: str | Path, namespace: str = '', *,
-                 node_name: str = 'visnav_recorder', queue_depth: int = QUEUE_DEPTH) -> None:
+                 node_name: str = 'visnav_recorder', queue_depth: int = QUEUE_DEPTH,
+                 paused: bool = False, root_names: bool = False) -> None:
+        """Create the bag at ``path`` (which must not exist) and start recording.
+
+        ``paused`` notes messages without writing them until :meth:`start`; ``root_names``
+        writes the graph topics under root-namespace names instead of their resolved ones.
+        """
         self.path = Path(path)
+        # root_names: write the graph topics as if the sim ran in the root namespace
+        # (camera/image_raw -> /camera/image_raw), the names the live view and the shipped
+        # Foxglove layout use; otherwise under their fully resolved names
+        self.root_names = root_names
+        self._extra: dict[str, Connection] = {}  # topics given to write(), by name
         self.namespace = '/' + namespace.strip('/') if namespace.strip('/') else ''
         if self.path.exists():
             raise RecordingError(f'{self.path} exists already; rosbag2 bags are never '
@@ -150,6 +162,8 @@ class BagRecorder:
         self._received = 0
         self._held: list[tuple[Connection, bytes, int]] = []  # unstamped, before any sim stamp
         self._wall_clock = False  # no sim stamp in time: unstamped messages get wall-clock time
+        # paused: messages stamped before this are only noted for wait_for (see start())
+        self._start_ns = _NEVER if paused else 0
         self._failure: BaseException | None = None
         self._closed = False
         self._stop = threading.Event()
@@ -162,6 +176,9 @@ class BagRecorder:
         try:
             self._writer = Writer(self.path, version=BAG_VERSION,
                                   storage_plugin=StoragePlugin.MCAP)
+            # zstd-compressed MCAP chunks (what `ros2 bag record --storage-preset-profile
+            # zstd_fast` writes): camera images shrink ~19x, every MCAP reader reads them
+            self._writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
             self._writer.open()
         except (WriterError, OSError) as exc:
             raise RecordingError(f'cannot create the bag {self.path}: {exc}') from exc
@@ -179,8 +196,9 @@ class BagRecorder:
                                               context=self._context,
                                               start_parameter_services=False, enable_rosout=False)
         for topic in TOPICS:
-            connection = self._add_connection(node.resolve_topic_name(topic.name),
-                                              topic.msgtype, [bag_qos(topic.profile)])
+            name = ('/' + topic.name.lstrip('/') if self.root_names
+                    else node.resolve_topic_name(topic.name))
+            connection = self._add_connection(name, topic.msgtype, [bag_qos(topic.profile)])
             profile = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=queue_depth,
                                  reliability=topic.profile.reliability,
                                  durability=topic.profile.durability)
@@ -241,6 +259,8 @@ class BagRecorder:
         with self._cond:
             if self._writer is None:
                 return
+            if self._start_ns and self._skip(connection, stamp_ns):
+                return
             if stamp_ns is None:
                 if self._sim_ns is None and not self._wall_clock:
                     self._hold(connection, data)
@@ -255,6 +275,16 @@ class BagRecorder:
             self._put(connection, stamp_ns, data)
             self._stamp_ns[connection.id] = max(stamp_ns, self._stamp_ns.get(connection.id, 0))
             self._cond.notify_all()
+
+    def _skip(self, connection: Connection, stamp_ns: int | None) -> bool:
+        """Note (for wait_for) but do not write what comes before the start (see start())."""
+        if stamp_ns is None:
+            return self._sim_ns is None or self._sim_ns < self._start_ns
+        if stamp_ns >= self._start_ns:
+            return False
+        self._stamp_ns[connection.id] = max(stamp_ns, self._stamp_ns.get(connection.id, 0))
+        self._cond.notify_all()
+        return True
 
     def _put(self, connection: Connection, when: int, data: bytes | memoryview) -> None:
         assert self._writer is not None
@@ -321,6 +351,16 @@ class BagRecorder:
                 raise RecordingError(f'recording into {self.path} failed: {self._failure}')
             return arrived()
 
+    def start(self, from_ns: int) -> None:
+        """Write messages stamped ``from_ns`` or later (a recorder made with ``paused=True``).
+
+        Before it, a paused recorder only notes what arrives, so :meth:`wait_for` can confirm
+        on warm-up periods that the sim has matched the recorder without them entering the bag.
+        Unstamped messages are written once a message stamped ``from_ns`` or later arrived.
+        """
+        with self._cond:
+            self._start_ns = from_ns
+
     def annotate(self, info: Mapping[str, Any]) -> None:
         """Write ``json.dumps(info)`` as a std_msgs/String on ``/visnav/episode``.
 
@@ -333,6 +373,23 @@ class BagRecorder:
             if self._writer is None:
                 raise RecordingError(f'cannot annotate {self.path}: the recorder is closed')
         self._write(self._episode_connection, data, None)
+
+    def write(self, topic: str, msgtype: str, data: bytes, stamp_ns: int) -> None:
+        """Write a message that does not come from the graph.
+
+        The message is CDR ``data`` of ``msgtype`` (a type of :data:`nav_eval.bags.TYPESTORE`),
+        written on ``topic`` at the sim stamp ``stamp_ns``.
+
+        The evaluation writes the live view's scene topics this way
+        (:mod:`nav_eval.bag_scene`).
+        """
+        with self._cond:
+            if self._writer is None:
+                raise RecordingError(f'cannot write to {self.path}: the recorder is closed')
+            connection = self._extra.get(topic)
+            if connection is None:
+                connection = self._extra[topic] = self._add_connection(topic, msgtype, [])
+        self._write(connection, data, stamp_ns)
 
     def _known(self, topics: Iterable[str]) -> tuple[str, ...]:
         topics = tuple(topics)
@@ -370,7 +427,9 @@ class BagRecorder:
                                  'the bag holds what was written before') from self._failure
 
     def __enter__(self) -> BagRecorder:
+        """Return the recorder itself."""
         return self
 
     def __exit__(self, *exc: object) -> None:
+        """Finish the recording (see :meth:`close`)."""
         self.close()

@@ -28,7 +28,7 @@ from typing import Any
 from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 
-from nav_sim import ros_msgs
+from nav_sim import live_topics, ros_msgs
 
 BAG_VERSION = 9            # the rosbag2 metadata version ROS 2 Jazzy writes
 IMAGE_TOPIC = 'camera/image_raw'
@@ -39,11 +39,12 @@ PERIOD_TOPICS = (IMAGE_TOPIC, 'camera/camera_info', 'odom', 'episode_event')
 #: topics every nav_sim node publishes
 SIM_TOPICS = (*PERIOD_TOPICS, 'goal_pose')
 
-TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
+#: ROS 2 Jazzy types plus the live view's visnav_msgs types (nav_sim.live_topics)
+TYPESTORE = live_topics.register_types(get_typestore(Stores.ROS2_JAZZY))
 
 
 def cdr_stamp_ns(data: bytes | memoryview) -> int | None:
-    """The builtin_interfaces/Time a CDR message starts with (header stamp, Clock), in ns.
+    """Return the builtin_interfaces/Time a CDR message starts with (header stamp, Clock), in ns.
 
     Reads 8 bytes after the 4-byte encapsulation header instead of deserializing the message;
     None if ``data`` is too short to hold one.
@@ -72,7 +73,7 @@ def read_bag(path: str | Path, topics: Iterable[str] | None = None
 
 
 def episodes_in_bag(path: str | Path) -> list[dict[str, Any]]:
-    """The ``/visnav/episode`` annotations of a bag, parsed from JSON, in recording order."""
+    """Return the ``/visnav/episode`` annotations of a bag, parsed from JSON, in order."""
     messages = read_bag(path, [EPISODE_TOPIC]).get(EPISODE_TOPIC, [])
     return [json.loads(msg.data) for _, msg in messages]
 

@@ -12,7 +12,6 @@ looks broken or suspect.  Writes ``RUN_DIR/eval/diagnosis.{json,md}`` and its fi
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import math
 from dataclasses import asdict
@@ -23,6 +22,8 @@ import numpy as np
 
 from nav_eval import layers
 from nav_eval.errors import DiagnosisError
+from nav_gym import run_dir as layout
+from nav_gym.actions import ACTION_NAMES, action_label
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.config import EnvConfig
 from nav_gym.timing import quiet_learner_threads
@@ -33,8 +34,8 @@ SEARCH_ORDER = ('dqn_heldout', 'dqn_train', 'early_heldout', 'early_train')
 
 
 def pick_episode(eval_dir: Path, set_name: str | None, seed: int | None) -> tuple[str, int]:
-    """The (set, seed) to diagnose: as given, or the first failure in ``SEARCH_ORDER``."""
-    results_path = eval_dir / 'results.json'
+    """Return the (set, seed) to diagnose: as given, or the first failure in ``SEARCH_ORDER``."""
+    results_path = eval_dir / layout.RESULTS
     if not results_path.is_file():
         raise DiagnosisError(f'no evaluation in {eval_dir}; run `ros2 run nav_eval evaluate '
                              f'{eval_dir.parent}` first')
@@ -54,17 +55,15 @@ def pick_episode(eval_dir: Path, set_name: str | None, seed: int | None) -> tupl
 
 def training_evidence(run_dir: Path, final_eps: float, tail: int = 50) -> dict | None:
     """Episodes and late success rate from the run's Monitor CSV."""
-    path = run_dir / 'monitor.csv'
+    path = run_dir / layout.MONITOR
     if not path.is_file():
         return None
-    with open(path) as handle:
-        rows = list(csv.DictReader(line for line in handle if not line.startswith('#')))
-    if not rows:
+    success = layout.read_monitor(path).get('is_success', [])
+    if not success:
         return None
-    last = rows[-tail:]
-    success = sum(r.get('is_success') == 'True' for r in last) / len(last)
-    return {'episodes': len(rows), 'tail': len(last), 'tail_success': success,
-            'final_eps': final_eps}
+    last = success[-tail:]
+    return {'episodes': len(success), 'tail': len(last),
+            'tail_success': sum(map(layout.truthy, last)) / len(last), 'final_eps': final_eps}
 
 
 def rerun(run_dir: Path, trace: dict) -> list[int]:
@@ -147,14 +146,14 @@ def trace_figure(trace: dict, frames: np.ndarray, out: Path) -> Path:
     q = [s['q_values'] for s in steps]
     actions = [s['action'] for s in steps]
     if all(q):
-        for k, name in enumerate(layers.ACTION_NAMES):
+        for k, name in enumerate(ACTION_NAMES):
             axes[1].plot(x, [v[k] for v in q], label=f'Q({name})', lw=1)
         axes[1].scatter(x, [v[a] for v, a in zip(q, actions, strict=True)], s=8, c='k',
                         label='chosen', zorder=3)
         axes[1].set_ylabel('Q-values')
     else:
         axes[1].step(x, actions, where='mid', color='k', label='action')
-        axes[1].set_yticks([0, 1, 2], layers.ACTION_NAMES)
+        axes[1].set_yticks([0, 1, 2], ACTION_NAMES)
     axes[1].legend(loc='upper right', fontsize=8)
     bearings = [layers.goal_bearing(frames[i]) for i in range(len(steps))]
     axes[2].plot(x, [math.nan if b is None else b for b in bearings], '.', color='tab:green')
@@ -170,17 +169,18 @@ def trace_figure(trace: dict, frames: np.ndarray, out: Path) -> Path:
 
 
 def write_diagnosis(run_dir: Path, diagnosis: dict, trace: dict, frames: np.ndarray) -> Path:
-    """diagnosis.json, diagnosis.md and figures under RUN_DIR/eval; returns the .md path and
-    adds the figures (relative to the run directory) to ``diagnosis``."""
+    """Write diagnosis.json, diagnosis.md and figures under RUN_DIR/eval; return the .md path.
+
+    The figures (relative to the run directory) are added to ``diagnosis``.
+    """
     from nav_eval import plots
-    eval_dir = run_dir / 'eval'
+    eval_dir = run_dir / layout.EVAL
     fig_dir = eval_dir / 'figures'
     fig_dir.mkdir(parents=True, exist_ok=True)
     stem = f"diagnosis_{trace['set']}_seed_{trace['seed']}"
+    labels = ['reset'] + [f"{s['step']} {action_label(s['action_name'])}" for s in trace['steps']]
     figures = [trace_figure(trace, frames, fig_dir / f'{stem}_trace.png'),
-               plots.contact_sheet(frames, fig_dir / f'{stem}_frames.png',
-                                   labels=['reset'] + [f"{s['step']} {s['action_name'][:3]}"
-                                                       for s in trace['steps']])]
+               plots.contact_sheet(frames, fig_dir / f'{stem}_frames.png', labels=labels)]
     diagnosis['figures'] = [str(f.relative_to(run_dir)) for f in figures]
     (eval_dir / 'diagnosis.json').write_text(json.dumps(diagnosis, indent=1))
     lines = [f"**Episode:** set `{trace['set']}`, seed {trace['seed']} ({trace['split']}), "
@@ -198,11 +198,12 @@ def write_diagnosis(run_dir: Path, diagnosis: dict, trace: dict, frames: np.ndar
 
 
 def load_episode(eval_dir: Path, set_name: str, seed: int) -> tuple[dict, np.ndarray]:
-    trace_path = eval_dir / 'traces' / set_name / f'seed_{seed}.json'
-    frames_path = trace_path.with_name(f'seed_{seed}_frames.npz')
+    """Return the trace and the observations of one evaluated episode."""
+    trace_path = layout.trace_path(eval_dir, set_name, seed)
+    frames_path = layout.frames_path(trace_path)
     if not (trace_path.is_file() and frames_path.is_file()):
-        raise DiagnosisError(f'no trace for {set_name} seed {seed} in {eval_dir / "traces"}; '
-                             're-run the evaluation')
+        raise DiagnosisError(f'no trace for {set_name} seed {seed} in '
+                             f'{eval_dir / layout.TRACES}; re-run the evaluation')
     with np.load(frames_path) as data:
         frames = data['obs']
     return json.loads(trace_path.read_text()), frames
@@ -212,19 +213,16 @@ def run(run_dir: Path, set_name: str | None = None, seed: int | None = None,
         replay: bool = True) -> dict[str, Any]:
     """Diagnose an episode of a run's evaluation and write the evidence."""
     from nav_eval.evaluate import run_config
-    eval_dir = run_dir / 'eval'
+    eval_dir = run_dir / layout.EVAL
     set_name, seed = pick_episode(eval_dir, set_name, seed)
     trace, frames = load_episode(eval_dir, set_name, seed)
     config = run_config(run_dir)
     env = config.env_config()
     sim = SimConfig.from_params(config.sim_params)
-    results = json.loads((eval_dir / 'results.json').read_text())
-    run_values = {'sim_params': config.sim_params, 'forward_speed': config.forward_speed,
-                  'turn_rate': config.turn_rate, 'turn_speed': config.turn_speed,
-                  'max_episode_steps': config.max_episode_steps}
+    results = json.loads((eval_dir / layout.RESULTS).read_text())
     diagnosis = diagnose(trace, frames, sim, env,
                          training_evidence(run_dir, config.exploration_final_eps),
-                         results.get('config'), run_values,
+                         results.get('config'), layout.eval_settings(config),
                          rerun(run_dir, trace) if replay else None)
     md = write_diagnosis(run_dir, diagnosis, trace, frames)
     print(diagnosis['summary'])
@@ -235,6 +233,7 @@ def run(run_dir: Path, set_name: str | None = None, seed: int | None = None,
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Run the ``nav-eval-diagnose`` command."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('run_dir', type=Path, help='training run directory (evaluated)')
     parser.add_argument('--set', dest='set_name', help='evaluation set (default: the first '

@@ -1,7 +1,7 @@
 """Deterministic evaluation of a training run on fixed seeds (Part 4 of the workshop).
 
     ros2 run nav_eval evaluate RUN_DIR [--sets ...] [--train-seeds 101-110]
-                                       [--heldout-seeds 201-210] [--no-record]
+                                       [--heldout-seeds 201-210] [--no-record] [--video]
 
 Default sets, all on the same scenarios per split: the random policy on the training seeds
 (baseline), the final DQN on the training seeds and on the held-out seeds, and the early
@@ -10,8 +10,9 @@ with ``predict(deterministic=True)``; the environment is built from the run's ow
 ``config.yaml`` (sim settings, action speeds, episode limit), so preprocessing and action timing
 are those of training.  Writes ``RUN_DIR/eval/``: ``results.json``, ``results.md``,
 ``episodes.csv``, per-episode traces (``traces/<set>/seed_<n>.json`` + ``_frames.npz``) and one
-rosbag2/MCAP bag per set under ``bags/<set>/``.  The same evaluation twice gives identical files
-(wall-clock time is only printed).
+rosbag2/MCAP bag per set under ``bags/<set>/``; with ``--video``, MP4 videos of the report's
+representative episodes under ``videos/`` (``nav_eval.video``).  The same evaluation twice gives
+identical files (wall-clock time is only printed).
 """
 
 from __future__ import annotations
@@ -28,12 +29,14 @@ import numpy as np
 from nav_eval import metrics
 from nav_eval.errors import EvaluationError
 from nav_eval.policies import DQNPolicy, Policy, RandomPolicy
+from nav_gym import run_dir as layout
 from nav_gym.checkpoints import checkpoints
 from nav_gym.cli import run_command, strip_ros_args
-from nav_gym.config import EnvConfig
 from nav_gym.env import NavigationEnv
+from nav_gym.errors import TrainConfigError
+from nav_gym.live_hooks import add_live_argument
 from nav_gym.timing import quiet_learner_threads
-from nav_gym.train_config import TrainConfig, load_yaml
+from nav_gym.train_config import TrainConfig
 from nav_sim.config import SimConfig, normalise_split
 
 TRAIN_SEEDS = tuple(range(101, 111))
@@ -43,7 +46,9 @@ SET_LABELS = {
     'dqn_heldout': 'DQN final, held-out seeds', 'early_train': 'DQN early, training seeds',
     'early_heldout': 'DQN early, held-out seeds'}
 DEFAULT_SETS = tuple(SET_LABELS)
-MATCH_SETTLE_S = 1.0
+#: where the sim was when the episode started (not part of the scenario; the bag has them)
+SIM_COUNTERS = ('episode', 'period', 'stamp_ns')
+WARM_UP_WAIT_S = 0.5  # how long a warm-up period may take to reach the recorder
 
 
 @dataclass(frozen=True)
@@ -65,6 +70,9 @@ def parse_seeds(text: str) -> tuple[int, ...]:
         for part in text.split(','):
             lo, _, hi = part.strip().partition('-')
             seeds += list(range(int(lo), int(hi) + 1)) if hi else [int(lo)]
+            if hi and int(hi) < int(lo):
+                raise EvaluationError(f'bad seed range {part.strip()!r} in {text!r}: the first '
+                                      f"seed must not exceed the last, e.g. '{hi}-{lo}'")
     except ValueError:
         raise EvaluationError(f"bad seed list {text!r}: use e.g. '101-110' or '101,102'") from None
     if not seeds or min(seeds) < 0:
@@ -73,15 +81,15 @@ def parse_seeds(text: str) -> tuple[int, ...]:
 
 
 def run_config(run_dir: Path) -> TrainConfig:
-    path = run_dir / 'config.yaml'
-    if not path.is_file():
-        raise EvaluationError(f'{run_dir} is not a training run directory (no config.yaml); '
-                              'train one with `ros2 run nav_gym train`')
-    return TrainConfig(**load_yaml(path))
+    """Return the run's TrainConfig, or raise EvaluationError saying what is wrong."""
+    try:
+        return layout.load_config(run_dir)
+    except TrainConfigError as exc:
+        raise EvaluationError(str(exc)) from None
 
 
 def early_checkpoint(run_dir: Path) -> str | None:
-    """The first checkpoint after step 0 (relative to the run directory), if any."""
+    """Return the first checkpoint after step 0 (relative to the run directory), if any."""
     found = [(s, p) for s, p in checkpoints(run_dir) if s > 0]
     return str(found[0][1].relative_to(run_dir)) if found else None
 
@@ -89,7 +97,7 @@ def early_checkpoint(run_dir: Path) -> str | None:
 def plan_sets(run_dir: Path, names: list[str], train_seeds: tuple[int, ...],
               heldout_seeds: tuple[int, ...], final: str = 'final_model.zip',
               early: str | None = None) -> list[EvalSet]:
-    """The evaluation sets to run, in the order given; raises on unknown names."""
+    """Return the evaluation sets to run, in the order given; raise on unknown names."""
     run_config(run_dir)  # a clear error first if this is not a run directory
     unknown = [n for n in names if n not in SET_LABELS]
     if unknown:
@@ -124,6 +132,7 @@ def run_episode(env: NavigationEnv, policy: Policy, seed: int, split: str,
     step_info: dict[str, Any] = {'distance': info['distance'], 'path_length': 0.0}
     while True:
         action, q_values = policy.act(obs)
+        env.note_q_values(q_values)  # for the live view and the bag's /visnav/step
         obs, reward, terminated, truncated, step_info = env.step(action)
         if recorder is not None:
             _recorded(recorder, env.last_stamp_ns)
@@ -142,14 +151,18 @@ def run_episode(env: NavigationEnv, policy: Policy, seed: int, split: str,
     result = metrics.episode_result(
         seed, split, event, truncated, len(steps), total, info['scenario']['initial_distance'],
         step_info['distance'], step_info['path_length'])
+    scenario = {k: v for k, v in info['scenario'].items() if k not in SIM_COUNTERS}
     trace = {'seed': seed, 'split': split, 'outcome': result.outcome,
-             'scenario': info['scenario'], 'steps': steps}
+             'scenario': scenario, 'steps': steps}
     return result, trace, np.stack(frames)
 
 
 def _recorded(recorder: Any, stamp_ns: int, timeout: float = 5.0) -> None:
-    """Lockstep with the recorder: the sim publishes with depth 1, so wait until the period's
-    messages are in the bag before the next command; a loss is reported, never silent."""
+    """Wait until the period's messages stamped ``stamp_ns`` are in the bag (lockstep).
+
+    The sim publishes with depth 1, so the next command must wait for the recorder; a loss is
+    reported, never silent.
+    """
     from nav_eval.bags import PERIOD_TOPICS
     if not recorder.wait_for(stamp_ns, timeout, PERIOD_TOPICS):
         print(f'warning: the bag misses messages of the period stamped {stamp_ns} ns',
@@ -173,9 +186,13 @@ def evaluate_set(env: NavigationEnv, run_dir: Path, eval_set: EvalSet, out: Path
     """Run every seed of a set; write its traces (and bag); return its results entry."""
     policy: Policy = (RandomPolicy() if eval_set.policy == 'random'
                       else DQNPolicy(run_dir / str(eval_set.checkpoint)))
-    trace_dir = out / 'traces' / eval_set.name
-    trace_dir.mkdir(parents=True, exist_ok=True)
+    layout.trace_path(out, eval_set.name, 0).parent.mkdir(parents=True, exist_ok=True)
     recorder = _open_recorder(out / 'bags' / eval_set.name, env) if record else None
+    scene_writer = None
+    if recorder is not None:  # the live view's scene topics go into the bag too
+        from nav_eval.bag_scene import BagSceneWriter
+        scene_writer = BagSceneWriter(recorder, env.config.sim_params)
+        env.observers.append(scene_writer)
     results = []
     try:
         for seed in eval_set.seeds:
@@ -184,14 +201,17 @@ def evaluate_set(env: NavigationEnv, run_dir: Path, eval_set: EvalSet, out: Path
             meta = {'set': eval_set.name, 'policy': eval_set.policy,
                     'checkpoint': eval_set.checkpoint}
             trace = {**meta, **trace}
-            (trace_dir / f'seed_{seed}.json').write_text(json.dumps(trace, indent=1))
-            np.savez_compressed(trace_dir / f'seed_{seed}_frames.npz', obs=frames)
+            trace_file = layout.trace_path(out, eval_set.name, seed)
+            trace_file.write_text(json.dumps(trace, indent=1))
+            np.savez_compressed(layout.frames_path(trace_file), obs=frames)
             if recorder is not None:
                 recorder.annotate({**meta, **result.to_dict()})
             print(f'  {eval_set.name:<14} seed {seed:>4}: {result.outcome:<9} '
                   f'{result.length:>4} steps  return {result.episode_return:+7.3f}  '
                   f'SPL {result.spl:.3f}', flush=True)
     finally:
+        if scene_writer is not None:
+            env.observers.remove(scene_writer)
         if recorder is not None:
             recorder.close()
     summary = metrics.summarize(results)
@@ -202,61 +222,68 @@ def evaluate_set(env: NavigationEnv, run_dir: Path, eval_set: EvalSet, out: Path
 
 
 def _open_recorder(path: Path, env: NavigationEnv, timeout: float = 10.0) -> Any:
-    """A bag recorder on the env's sim, matched with it before the first reset is published."""
+    """Return a bag recorder on the env's sim that the sim is known to deliver to.
+
+    The sim can match the recorder's subscriptions some time after the recorder has matched
+    its publishers; what it publishes before then never reaches the bag.  So the recorder
+    starts paused and the sim is reset (a warm-up period, not written) until one whole
+    control period has reached the recorder; the bag starts after it.
+    """
     from nav_eval.bag_recorder import BagRecorder
+    from nav_eval.bags import PERIOD_TOPICS, SIM_TOPICS
     if path.exists():
         import shutil
         shutil.rmtree(path)  # a re-run replaces the bag of the same set
     path.parent.mkdir(parents=True, exist_ok=True)
-    recorder = BagRecorder(path, namespace=env.namespace)
-    node = env.client.node
-    topic = node.resolve_topic_name('camera/image_raw')
+    # root names: the bag's topics are those of the live view and the Foxglove layout
+    recorder = BagRecorder(path, namespace=env.namespace, paused=True, root_names=True)
     deadline = time.monotonic() + timeout
-    ready = recorder.wait_for_publishers(timeout)
-    while ready and node.count_subscribers(topic) < 2:  # the env's client and the recorder
-        if time.monotonic() > deadline:
-            ready = False
-            break
-        time.sleep(0.01)
-    if not ready:
-        recorder.close()
-        raise EvaluationError(f'the bag recorder could not connect to nav_sim in '
-                              f'{env.namespace} within {timeout} s')
-    # discovery can report the match ~0.4 s before the sim's publishers deliver to it
-    time.sleep(MATCH_SETTLE_S)
-    return recorder
+    # cmd_vel is the env's own publisher: it delivers to the recorder once it has matched the
+    # recorder's subscription (the sim's subscription is the other one)
+    commands = env.client.pub_cmd
+    if recorder.wait_for_publishers(timeout, (*SIM_TOPICS, 'cmd_vel')):
+        while time.monotonic() < deadline:
+            frame, _ = env.client.reset(0, 'train')
+            if (recorder.wait_for(frame.stamp_ns, WARM_UP_WAIT_S, (*PERIOD_TOPICS, '/clock'))
+                    and commands.get_subscription_count() >= 2):
+                recorder.start(frame.stamp_ns + 1)
+                return recorder
+    recorder.close()
+    raise EvaluationError(f'the bag recorder could not connect to nav_sim in '
+                          f'{env.namespace} within {timeout} s')
 
 
 def env_for_run(config: TrainConfig, record: bool, sim: str = 'embedded') -> NavigationEnv:
-    """The training environment of a run (same sim settings and actions)."""
+    """Return the training environment of a run (same sim, actions and reward weights)."""
     sim_params = dict(config.sim_params)
     if record:
         sim_params['publish_clock'] = True
-    return NavigationEnv(EnvConfig(sim=sim, sim_timeout=max(config.sim_timeout, 5.0),
-                                   max_episode_steps=config.max_episode_steps,
-                                   forward_speed=config.forward_speed,
-                                   turn_rate=config.turn_rate, turn_speed=config.turn_speed,
-                                   sim_params=sim_params))
+    return NavigationEnv(config.env_config(sim=sim, namespace='',
+                                           sim_timeout=max(config.sim_timeout, 5.0),
+                                           sim_params=sim_params))
 
 
 def evaluate(run_dir: Path, sets: list[EvalSet], out: Path | None = None,
-             record: bool = True) -> dict[str, Any]:
+             record: bool = True, *, live_port: int = 0) -> dict[str, Any]:
     """Evaluate every set and write results.json / results.md / episodes.csv under ``out``."""
     config = run_config(run_dir)
-    out = out or run_dir / 'eval'
-    out.mkdir(parents=True, exist_ok=True)
+    out = out or run_dir / layout.EVAL
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise EvaluationError(f'cannot create the output directory {out} ({exc.strerror}); '
+                              'choose another --out') from None
     env = env_for_run(config, record)
     try:
+        if live_port:  # --live: this process serves the Foxglove live view
+            print(f'live view: open {env.start_live(live_port)} in Foxglove', flush=True)
         entries = [evaluate_set(env, run_dir, s, out, record) for s in sets]
     finally:
         env.close()
     results = {'run_dir': str(run_dir), 'arena': arena_description(config.sim_params),
-               'config': {'sim_params': config.sim_params,
-                          'forward_speed': config.forward_speed, 'turn_rate': config.turn_rate,
-                          'turn_speed': config.turn_speed,
-                          'max_episode_steps': config.max_episode_steps},
+               'config': layout.eval_settings(config),
                'sets': entries}
-    (out / 'results.json').write_text(json.dumps(results, indent=1))
+    (out / layout.RESULTS).write_text(json.dumps(results, indent=1))
     (out / 'results.md').write_text(results_markdown(entries))
     (out / 'episodes.csv').write_text(metrics.episodes_csv(
         (e['name'], e['episodes']) for e in entries))
@@ -264,6 +291,7 @@ def evaluate(run_dir: Path, sets: list[EvalSet], out: Path | None = None,
 
 
 def results_markdown(entries: list[dict[str, Any]]) -> str:
+    """Return the Markdown results table, one row per evaluated set with its seed range."""
     rows = [metrics.summary_row(f"{e['label']} ({_seed_range(e['seeds'])})",
                                 metrics.SetSummary(**e['summary'])) for e in entries]
     return metrics.markdown_table(metrics.TABLE_COLUMNS, rows) + '\n'
@@ -275,7 +303,21 @@ def _seed_range(seeds: list[int]) -> str:
         map(str, seeds))
 
 
+def write_videos(run_dir: Path) -> None:
+    """Write the videos of the report's representative episodes to RUN_DIR/eval/videos/."""
+    from nav_eval import report  # matplotlib and ffmpeg only when asked for
+    start = time.perf_counter()
+    written = report.write_videos(report.load_run(run_dir), run_dir / layout.EVAL / 'videos')
+    for caption, path, problem in written:
+        print(f'video {path}: {caption}' if path else f'no video of {caption}: {problem}')
+    if not written:
+        print('no videos: no DQN episode to show (evaluate a dqn_* or early_* set)')
+    print(f'wrote {sum(bool(p) for _, p, _ in written)} videos in '
+          f'{time.perf_counter() - start:.1f} s')
+
+
 def main(argv: list[str] | None = None) -> None:
+    """Run the ``nav-eval-evaluate`` command: evaluate the sets and print the results table."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('run_dir', type=Path, help='training run directory')
     parser.add_argument('--sets', default=','.join(DEFAULT_SETS),
@@ -288,19 +330,29 @@ def main(argv: list[str] | None = None) -> None:
                         'after step 0)')
     parser.add_argument('--out', type=Path, help='output directory (default RUN_DIR/eval)')
     parser.add_argument('--no-record', action='store_true', help='do not write MCAP bags')
+    parser.add_argument('--video', action='store_true', help='also write MP4 videos of the '
+                        "report's representative episodes to RUN_DIR/eval/videos/")
+    add_live_argument(parser)
     args = parser.parse_args(strip_ros_args(argv))
     quiet_learner_threads()  # the policy's forward passes must not spin against the sim
 
     def body() -> int:
+        if args.video and args.out and args.out.resolve() != (
+                args.run_dir / layout.EVAL).resolve():
+            raise EvaluationError('--video reads the evaluation where the report does, in '
+                                  'RUN_DIR/eval: leave out --out')
         sets = plan_sets(args.run_dir, [s for s in args.sets.split(',') if s],
                          parse_seeds(args.train_seeds), parse_seeds(args.heldout_seeds),
                          args.checkpoint, args.early_checkpoint)
         start = time.perf_counter()
-        results = evaluate(args.run_dir, sets, args.out, record=not args.no_record)
+        results = evaluate(args.run_dir, sets, args.out, record=not args.no_record,
+                           live_port=args.live)
         print(results_markdown(results['sets']))
         print(f'evaluated {sum(len(s.seeds) for s in sets)} episodes in '
               f'{time.perf_counter() - start:.1f} s; results in '
               f"{args.out or args.run_dir / 'eval'}")
+        if args.video:
+            write_videos(args.run_dir)
         return 0
 
     run_command('nav-eval-evaluate', body)

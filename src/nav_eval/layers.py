@@ -17,9 +17,11 @@ from typing import Any
 
 import numpy as np
 
+from nav_gym.actions import ACTION_NAMES
+from nav_gym.run_dir import EVAL_SETTINGS
+
 LAYERS = ('visual observation', 'action timing', 'reward', 'training / exploration',
           'evaluation')
-ACTION_NAMES = ('left', 'forward', 'right')
 
 
 @dataclass
@@ -32,12 +34,14 @@ class LayerVerdict:
     reason: str = ''  # the first finding at the verdict's (most severe) status
 
     def flag(self, status: str, text: str) -> None:
+        """Add a finding; the verdict becomes ``status`` if that is more severe."""
         order = ('n/a', 'ok', 'suspect', 'broken')
         if order.index(status) > order.index(self.status):
             self.status, self.reason = status, text
         self.evidence.append(text)
 
     def note(self, text: str) -> None:
+        """Add evidence that changes no verdict."""
         self.evidence.append(text)
 
 
@@ -57,6 +61,7 @@ def goal_bearing(obs: np.ndarray, min_pixels: int = 2) -> float | None:
 
 
 def check_observations(frames: np.ndarray, steps: Sequence[dict]) -> LayerVerdict:
+    """Check shape and dtype, blank and stale frames, and whether the goal is ever in view."""
     v = LayerVerdict(LAYERS[0])
     if frames.ndim != 4 or frames.shape[1:] != (3, 84, 84) or frames.dtype != np.uint8:
         v.flag('broken', f'observations are {frames.shape} {frames.dtype}, the contract is '
@@ -151,7 +156,7 @@ def check_actions(steps: Sequence[dict], start_pose: Sequence[float], forward_st
 
 
 def behaviour_notes(steps: Sequence[dict], turn_step: float) -> list[str]:
-    """Action histogram, longest same-direction spin and left/right dithering."""
+    """Describe the action histogram, longest same-direction spin and left/right dithering."""
     actions = [s['action'] for s in steps]
     counts = Counter(ACTION_NAMES[a] for a in actions)
     notes = ['actions: ' + ', '.join(f'{n} {counts[n]}' for n in ACTION_NAMES)]
@@ -200,14 +205,18 @@ def check_reward(steps: Sequence[dict], initial_distance: float,
 
 
 def centre_band(turn_step: float, hfov: float) -> float:
-    """Half-width of 'centred' in bearing units: a bit over half a turn step (a turn cannot
-    centre the goal better than that)."""
+    """Return the half-width of 'centred' in bearing units: a bit over half a turn step.
+
+    A turn cannot centre the goal better than that.
+    """
     return min(0.9, 1.2 * turn_step / hfov)
 
 
 def servo_action(bearing: float | None, band: float = 0.3) -> int | None:
-    """What a visual servo would do: turn toward a visible goal, drive when it is centred
-    (``|bearing| <= band``)."""
+    """Return what a visual servo would do: turn toward a visible goal, drive when centred.
+
+    Centred means ``|bearing| <= band``; None when the goal is not in view.
+    """
     if bearing is None:
         return None
     return 0 if bearing < -band else (2 if bearing > band else 1)
@@ -245,14 +254,19 @@ def check_policy(steps: Sequence[dict], frames: np.ndarray, outcome: str,
 
 def check_evaluation(trace: dict, eval_config: dict | None, run_config: dict | None,
                      rerun_actions: list[int] | None) -> LayerVerdict:
+    """Compare evaluation settings with the run's and the episode with its re-run.
+
+    Settings compared are those both sides record (an older evaluation has fewer).
+    """
     v = LayerVerdict(LAYERS[4])
     if eval_config and run_config:
-        keys = ('sim_params', 'forward_speed', 'turn_rate', 'turn_speed', 'max_episode_steps')
+        keys = [k for k in EVAL_SETTINGS if k in eval_config and k in run_config]
         diff = [k for k in keys if eval_config.get(k) != run_config.get(k)]
         if diff:
             v.flag('broken', f'evaluation settings differ from training: {diff}')
         else:
-            v.note('evaluation used the training settings (sim, action speeds, time limit)')
+            v.note('evaluation used the training settings (sim, action speeds, time limit, '
+                   'reward weights)')
     if rerun_actions is not None:
         logged = [s['action'] for s in trace['steps']]
         if rerun_actions != logged:

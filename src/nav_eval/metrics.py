@@ -34,6 +34,7 @@ class EpisodeResult:
     spl: float
 
     def to_dict(self) -> dict:
+        """Return the episode as in results.json (``return``, floats rounded to 6 digits)."""
         out = asdict(self)
         out['return'] = out.pop('episode_return')
         return {k: (round(v, 6) if isinstance(v, float) else v) for k, v in out.items()}
@@ -52,6 +53,7 @@ class SetSummary:
     mean_return: float
 
     def to_dict(self) -> dict:
+        """Return the summary as in results.json (floats rounded to 6 digits)."""
         return {k: (round(v, 6) if isinstance(v, float) else v)
                 for k, v in asdict(self).items()}
 
@@ -110,13 +112,14 @@ TABLE_COLUMNS = ('Set', 'Episodes', 'Success', 'Collision', 'Timeout', 'Mean len
 
 
 def summary_row(label: str, s: SetSummary) -> list[str]:
+    """Return one row of :data:`TABLE_COLUMNS` for a set."""
     return [label, str(s.episodes), f'{s.success_rate:.0%}', f'{s.collision_rate:.0%}',
             f'{s.timeout_rate:.0%}', f'{s.mean_length:.1f}', f'{s.mean_spl:.3f}',
             f'{s.mean_return:.3f}']
 
 
 def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
-    """A GitHub-flavoured Markdown pipe table."""
+    """Return a GitHub-flavoured Markdown pipe table."""
     lines = ['| ' + ' | '.join(header) + ' |',
              '|' + '|'.join('---' if i == 0 else '---:' for i in range(len(header))) + '|']
     lines += ['| ' + ' | '.join(row) + ' |' for row in rows]
@@ -124,8 +127,10 @@ def markdown_table(header: Sequence[str], rows: Iterable[Sequence[str]]) -> str:
 
 
 def episodes_csv(sets: Iterable[tuple[str, Sequence[dict]]]) -> str:
-    """All episodes as CSV, one row each, prefixed by the set name; the episodes are
-    :meth:`EpisodeResult.to_dict` rows (as in results.json)."""
+    """Return all episodes as CSV, one row each, prefixed by the set name.
+
+    The episodes are :meth:`EpisodeResult.to_dict` rows (as in results.json).
+    """
     names = [('return' if f.name == 'episode_return' else f.name) for f in fields(EpisodeResult)]
     out = io.StringIO()
     writer = csv.writer(out, lineterminator='\n')

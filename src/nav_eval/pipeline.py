@@ -24,6 +24,7 @@ from nav_gym.checks import run_checklist
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.config import EnvConfig
 from nav_gym.env import NavigationEnv
+from nav_gym.live_hooks import add_live_argument
 from nav_gym.timing import quiet_learner_threads
 from nav_gym.train import new_run_dir, train
 from nav_gym.train_config import TrainConfig
@@ -36,14 +37,16 @@ VALIDATION_STEPS = 100
 
 
 def stage(number: int) -> None:
+    """Print the heading of a stage."""
     print(f'\n[{number}/{len(STAGES)}] {STAGES[number - 1]}', flush=True)
 
 
 def validate_run(config: TrainConfig, run_dir: Path) -> bool:
-    """The workshop's validation checklist on the run's environment; writes validation.json.
+    """Run the workshop's validation checklist on the run's environment (validation.json).
 
     Episodes get at least VALIDATION_STEPS so the scripted drivers can reach the goal and a
-    wall whatever the run's time limit (the time-limit check uses its own 5-step env)."""
+    wall whatever the run's time limit (the time-limit check uses its own 5-step env).
+    """
     env_config = EnvConfig(**{**asdict(config.env_config()), 'sim': 'embedded',
                               'namespace': '', 'max_episode_steps':
                               max(config.max_episode_steps, VALIDATION_STEPS)})
@@ -58,7 +61,8 @@ def validate_run(config: TrainConfig, run_dir: Path) -> bool:
 
 
 def run_pipeline(config: TrainConfig, run_dir: Path, resume: bool,
-                 experiments: Path | None) -> int:
+                 experiments: Path | None, live_port: int = 0) -> int:
+    """Run the five stages (skipping finished ones); ``live_port`` serves the live view."""
     start = time.perf_counter()
     stage(1)
     if resume and (run_dir / 'validation.json').is_file():
@@ -70,16 +74,16 @@ def run_pipeline(config: TrainConfig, run_dir: Path, resume: bool,
     if (run_dir / 'final_model.zip').is_file():
         print('already trained (final_model.zip)')
     else:
-        summary = train(config, run_dir, resume=resume and bool(checkpoints(run_dir)))
+        summary = train(config, run_dir, resume=resume and bool(checkpoints(run_dir)),
+                        resume_command='visnav-pipeline --resume', live_port=live_port)
         print(f"trained {summary['num_timesteps']} steps in {summary['wall_clock_s']:.0f} s "
               f"({summary['steps_per_s']} steps/s, env share {summary['env_share']:.1%})")
         if summary['interrupted']:
-            print(f'continue with: visnav-pipeline --resume {run_dir}')
             return 130
     stage(3)
     sets = evaluate.plan_sets(run_dir, list(evaluate.DEFAULT_SETS), evaluate.TRAIN_SEEDS,
                               evaluate.HELDOUT_SEEDS)
-    results = evaluate.evaluate(run_dir, sets)
+    results = evaluate.evaluate(run_dir, sets, live_port=live_port)
     print(evaluate.results_markdown(results['sets']))
     stage(4)
     try:
@@ -95,6 +99,7 @@ def run_pipeline(config: TrainConfig, run_dir: Path, resume: bool,
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Run the ``visnav-pipeline`` command."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--config', help='YAML file with training settings '
                         '(default: the workshop settings, see config/train.yaml)')
@@ -102,6 +107,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--experiments', type=Path, default=EXPERIMENTS_LOG,
                         help='Markdown log of task-design attempts to include in the report')
     train_config.add_arguments(parser)
+    add_live_argument(parser)  # training, then evaluation, serve it in turn on the same port
     args = parser.parse_args(strip_ros_args(argv))
     overrides = {k: v for k, v in vars(args).items() if k in train_config.FIELDS}
     quiet_learner_threads()
@@ -117,7 +123,8 @@ def main(argv: list[str] | None = None) -> None:
             run_dir = new_run_dir(config)
             (run_dir / 'config.yaml').write_text(config.to_yaml())
         print(f'run directory: {run_dir}', flush=True)
-        return run_pipeline(config, run_dir, bool(args.resume), args.experiments)
+        return run_pipeline(config, run_dir, bool(args.resume), args.experiments,
+                            live_port=args.live)
 
     run_command('visnav-pipeline', body)
 

@@ -9,7 +9,6 @@ yaw, or a cylinder of radius ``half_x``).
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Sequence
 from pathlib import Path
@@ -25,35 +24,28 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.patches import Circle, Polygon, Rectangle  # noqa: E402
 
+from nav_gym import run_dir as layout  # noqa: E402
+from nav_gym.actions import action_label  # noqa: E402
 from nav_gym.checkpoints import checkpoints  # noqa: E402
 
 DPI = 100
 OUTCOME_COLOURS = {'success': 'tab:green', 'collision': 'tab:red', 'timeout': 'tab:orange'}
-ACTION_ABBREVIATIONS = {'left': 'left', 'forward': 'fwd', 'right': 'right'}
 
 
 def read_monitor(path: Path) -> dict[str, np.ndarray]:
-    """Episodes of an SB3 Monitor CSV: ``r``, ``l``, ``t``, ``steps`` (cumulative ``l``) and,
-    when logged, ``is_success`` (0/1) and ``event``.  Header lines repeated by resumed runs are
-    skipped."""
-    rows: list[dict[str, str]] = []
-    with open(path, newline='') as handle:
-        lines = [line for line in handle if line.strip() and not line.startswith('#')]
-    header = lines[0].strip().split(',') if lines else ['r', 'l', 't']
-    for row in csv.DictReader(lines[1:], fieldnames=header):
-        if row.get('r') != 'r':
-            rows.append(row)
-    data = {key: np.array([float(row[key]) for row in rows]) for key in ('r', 'l', 't')}
+    """Read the episodes of an SB3 Monitor CSV as arrays.
+
+    ``r``, ``l``, ``t``, ``steps`` (cumulative ``l``) and, when logged, ``is_success`` (0/1)
+    and ``event``; parsed by :func:`nav_gym.run_dir.read_monitor`.
+    """
+    columns = layout.read_monitor(path)
+    data = {key: np.array([float(v) for v in columns.get(key, [])]) for key in ('r', 'l', 't')}
     data['steps'] = np.cumsum(data['l'])
-    if 'is_success' in header:
-        data['is_success'] = np.array([_truthy(row.get('is_success')) for row in rows])
-    if 'event' in header:
-        data['event'] = np.array([row.get('event') or '' for row in rows])
+    if 'is_success' in columns:
+        data['is_success'] = np.array([float(layout.truthy(v)) for v in columns['is_success']])
+    if 'event' in columns:
+        data['event'] = np.array(columns['event'], dtype=str)
     return data
-
-
-def _truthy(value: str | None) -> float:
-    return 1.0 if str(value).strip().lower() in ('true', '1', '1.0') else 0.0
 
 
 def rolling_mean(values: np.ndarray, window: int) -> np.ndarray:
@@ -66,17 +58,18 @@ def rolling_mean(values: np.ndarray, window: int) -> np.ndarray:
 
 
 def checkpoint_steps(run_dir: Path) -> list[int]:
-    """Steps of the run's ``checkpoints/dqn_<steps>_steps.zip`` files, ascending."""
+    """Return the steps of the run's checkpoints, ascending."""
     return [steps for steps, _ in checkpoints(run_dir)]
 
 
 def smoothing_window(episodes: int) -> int:
+    """Return the rolling-mean window for a number of episodes (a tenth, 1 to 100)."""
     return max(1, min(100, episodes // 10))
 
 
 def training_curves(run_dir: Path, out: Path) -> Path:
     """Episode return, length and (if logged) success/collision rate vs environment steps."""
-    data = read_monitor(run_dir / 'monitor.csv')
+    data = read_monitor(run_dir / layout.MONITOR)
     rates = 'is_success' in data
     fig, axes = plt.subplots(3 if rates else 2, 1, figsize=(9, 8.4 if rates else 6),
                              sharex=True, dpi=DPI)
@@ -116,7 +109,7 @@ def training_curves(run_dir: Path, out: Path) -> Path:
 
 def obstacle_patch(shape: dict[str, Any], placement: dict[str, Any], **style: Any
                    ) -> Circle | Polygon:
-    """The footprint of one placed obstacle as a patch in arena coordinates."""
+    """Return the footprint of one placed obstacle as a patch in arena coordinates."""
     x, y = float(placement['x']), float(placement['y'])
     if shape['kind'] == 'cylinder':
         return Circle((x, y), float(shape['half_x']), **style)
@@ -198,8 +191,10 @@ def draw_trajectory(ax: Axes, trace: dict[str, Any], arena: dict[str, Any],
 
 def trajectory(trace: dict[str, Any], arena: dict[str, Any], out: Path,
                ax: Axes | None = None) -> Path:
-    """One episode top-down.  With ``ax`` the caller owns the figure: it is drawn into and
-    saved, not closed."""
+    """Draw one episode top-down and save it.
+
+    With ``ax`` the caller owns the figure: it is drawn into and saved, not closed.
+    """
     if ax is not None:
         draw_trajectory(ax, trace, arena)
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -239,7 +234,7 @@ def frame_indices(count: int, every: int | None = None, limit: int = 24) -> list
 
 def contact_sheet(frames: np.ndarray, out: Path, every: int | None = None,
                   labels: list[str] | None = None, title: str = '') -> Path:
-    """A grid of up to 24 camera frames ``(T, 3, H, W)`` uint8 with one label each."""
+    """Draw a grid of up to 24 camera frames ``(T, 3, H, W)`` uint8 with one label each."""
     frames = np.asarray(frames)
     if frames.ndim != 4:
         raise ValueError(f'expected frames of shape (T, 3, H, W), got {frames.shape}')
@@ -266,7 +261,7 @@ def frame_labels(steps: Sequence[dict[str, Any]]) -> list[str]:
     labels = ['reset']
     for number, step in enumerate(steps, start=1):
         name = str(step.get('action_name', step.get('action', '')))
-        text = f"step {step.get('step', number)} {ACTION_ABBREVIATIONS.get(name, name)}"
+        text = f"step {step.get('step', number)} {action_label(name)}"
         event = step.get('event', 'none')
         labels.append(text if event in ('none', None) else f'{text} {event}')
     return labels

@@ -1,22 +1,33 @@
-"""Policies for evaluation: the frozen DQN (deterministic, with its Q-values) and a seeded
-uniform-random baseline.  Both only ever see the observation image."""
+"""Policies for evaluation, each acting on the observation image only.
+
+The frozen DQN (deterministic, with its Q-values), a seeded uniform-random baseline and a
+scripted visual servo.
+"""
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
 from nav_eval.errors import EvaluationError
+from nav_eval.layers import centre_band, goal_bearing, servo_action
 
 
 class Policy(Protocol):
+    """What evaluation needs of a policy: a name, an episode start and an action per image."""
+
     name: str
 
-    def begin_episode(self, seed: int) -> None: ...
+    def begin_episode(self, seed: int) -> None:
+        """Prepare for the episode of scenario ``seed``."""
+        ...
 
-    def act(self, observation: np.ndarray) -> tuple[int, list[float] | None]: ...
+    def act(self, observation: np.ndarray) -> tuple[int, list[float] | None]:
+        """Choose an action for an observation; also return Q-values if the policy has them."""
+        ...
 
 
 class RandomPolicy:
@@ -25,14 +36,47 @@ class RandomPolicy:
     name = 'random'
 
     def __init__(self, actions: int = 3) -> None:
+        """Draw from ``actions`` actions."""
         self.actions = actions
         self._rng = np.random.default_rng(0)
 
     def begin_episode(self, seed: int) -> None:
+        """Reseed from the scenario seed."""
         self._rng = np.random.default_rng([7, seed])
 
     def act(self, observation: np.ndarray) -> tuple[int, list[float] | None]:
+        """Draw an action (the image is ignored)."""
         return int(self._rng.integers(self.actions)), None
+
+
+class ServoPolicy:
+    """Turn toward the green goal pixels, drive when they are centred, else turn left.
+
+    A scripted image-only baseline, the probe of docs/experiments.md: it asks whether the task
+    is solvable from single images, and it measures how hard a scenario bank is without any
+    learning.
+    """
+
+    name = 'servo'
+
+    def __init__(self, band: float = 0.3) -> None:
+        """Drive when the goal centroid is within ``band`` of the image centre (-1..1 units)."""
+        self.band = band
+
+    @classmethod
+    def for_actions(cls, turn_rate: float, control_period: float,
+                    hfov_deg: float) -> ServoPolicy:
+        """Make a servo whose 'centred' band fits one turn step of these actions and camera."""
+        return cls(centre_band(turn_rate * control_period, math.radians(hfov_deg)))
+
+    def begin_episode(self, seed: int) -> None:
+        """Start an episode (the servo keeps no state)."""
+        return None
+
+    def act(self, observation: np.ndarray) -> tuple[int, list[float] | None]:
+        """Steer toward the goal's bearing in the image; turn left while it is not in view."""
+        action = servo_action(goal_bearing(observation), self.band)
+        return (0 if action is None else action), None
 
 
 class DQNPolicy:
@@ -41,19 +85,23 @@ class DQNPolicy:
     name = 'dqn'
 
     def __init__(self, path: str | Path, device: str = 'cpu') -> None:
+        """Load the checkpoint at ``path`` onto ``device``."""
         self.path = Path(path)
         self.model = load_dqn(self.path, device)
 
     def begin_episode(self, seed: int) -> None:
+        """Start an episode (the frozen network keeps no state)."""
         return None
 
     def q_values(self, observation: np.ndarray) -> np.ndarray:
+        """Return the network's Q-value of every action for one observation."""
         import torch
         tensor, _ = self.model.policy.obs_to_tensor(observation)
         with torch.no_grad():
             return self.model.q_net(tensor)[0].cpu().numpy()
 
     def act(self, observation: np.ndarray) -> tuple[int, list[float] | None]:
+        """Take the greedy action; also return the Q-values it was chosen from."""
         action, _ = self.model.predict(observation, deterministic=True)
         return int(action), [round(float(q), 6) for q in self.q_values(observation)]
 

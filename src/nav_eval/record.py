@@ -17,29 +17,17 @@ from collections.abc import Sequence
 from types import FrameType
 
 from nav_eval.bag_recorder import BagRecorder
+from nav_eval.bags import PERIOD_TOPICS
 from nav_eval.errors import RecordingError
+from nav_gym.cli import strip_ros_args
 
 PROG = 'nav-eval-record'
 TICK_S = 0.1
 NOTICE_S = 5.0
 
 
-def strip_ros_args(argv: Sequence[str]) -> list[str]:
-    """``argv`` without its ``--ros-args ... [--]`` blocks."""
-    out: list[str] = []
-    inside = False
-    for arg in argv:
-        if arg == '--ros-args':
-            inside = True
-        elif inside and arg == '--':
-            inside = False
-        elif not inside:
-            out.append(arg)
-    return out
-
-
 def positive_seconds(text: str) -> float:
-    """argparse type: a finite duration above zero."""
+    """Parse a finite duration above zero (an argparse type)."""
     try:
         value = float(text)
     except ValueError:
@@ -50,7 +38,7 @@ def positive_seconds(text: str) -> float:
 
 
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
-    """The command line of ``nav-eval-record`` (ROS arguments removed)."""
+    """Parse the command line of ``nav-eval-record`` (ROS arguments removed)."""
     parser = argparse.ArgumentParser(
         prog=PROG, description='Record the nav_sim topics of a namespace into a rosbag2/MCAP '
         'bag until Ctrl-C, SIGTERM or --duration.')
@@ -67,9 +55,11 @@ class StopRequest:
     """Set by SIGINT/SIGTERM; a flag, so the handler can interrupt nothing mid-way."""
 
     def __init__(self) -> None:
+        """Start with no signal received."""
         self.signal_name: str | None = None
 
     def __call__(self, signum: int, frame: FrameType | None) -> None:
+        """Note the signal's name (the signal handler)."""
         self.signal_name = signal.Signals(signum).name
 
 
@@ -77,13 +67,17 @@ def wait_until_stopped(recorder: BagRecorder, stop: StopRequest,
                        duration: float | None) -> None:
     """Sleep in short ticks until a stop signal arrives or ``duration`` seconds pass.
 
-    Says once when the sim's publishers are matched, or after ``NOTICE_S`` that none are.
+    Says once when the sim's publishers are matched, or after ``NOTICE_S`` that none are, and
+    once when a message of every per-period topic has arrived (the sim delivers to the bag).
     """
     where = recorder.namespace or '/'
     start = time.monotonic()
     deadline = None if duration is None else start + duration
-    found = hinted = False
+    found = hinted = receiving = False
     while stop.signal_name is None:
+        if found and not receiving and recorder.wait_for(0, 0.0, PERIOD_TOPICS):
+            receiving = True
+            print(f'{PROG}: receiving every nav_sim topic of {where}', flush=True)
         if not found and recorder.wait_for_publishers(0.0):
             found = True
             print(f'{PROG}: nav_sim publishers matched in {where}', flush=True)

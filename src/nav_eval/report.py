@@ -5,8 +5,9 @@
 
 Reads what the other commands left in RUN_DIR (validation.json, summary.json, monitor.csv,
 checkpoints/, eval/results.json, eval/traces/, eval/diagnosis.*) and writes
-RUN_DIR/report/Result.md, RUN_DIR/report/Result.html and RUN_DIR/report/figures/*.png.  Every
-section is written; one whose input is missing says which command produces it.
+RUN_DIR/report/Result.md, RUN_DIR/report/Result.html, RUN_DIR/report/figures/*.png and the
+rollout videos RUN_DIR/report/videos/*.mp4 (``nav_eval.video``).  Every section is written; one
+whose input is missing says which command produces it.
 """
 
 from __future__ import annotations
@@ -23,8 +24,9 @@ from typing import Any
 import numpy as np
 import yaml
 
-from nav_eval import plots
-from nav_eval.errors import NavEvalError
+from nav_eval import plots, video
+from nav_eval.diagnose import pick_episode
+from nav_eval.errors import DiagnosisError, NavEvalError
 from nav_eval.report_format import (
     IMAGE_RE,
     details,
@@ -36,7 +38,9 @@ from nav_eval.report_format import (
     pct,
     table,
     to_html,
+    video_link,
 )
+from nav_gym import run_dir as layout
 from nav_gym.checkpoints import CHECKPOINT_RE
 from nav_gym.cli import run_command, strip_ros_args
 
@@ -74,6 +78,7 @@ class Run:
     problems: list[str] = field(default_factory=list)
 
     def read(self, relative: str) -> Any:
+        """Load a JSON or YAML file of the run; None if absent, noted in ``problems`` if bad."""
         path = self.path / relative
         if not path.is_file():
             return None
@@ -85,6 +90,7 @@ class Run:
             return None
 
     def sets(self) -> list[dict[str, Any]]:
+        """Return the evaluated sets of ``eval/results.json`` (empty when there are none)."""
         return list((self.results or {}).get('sets', []))
 
     def figure(self, name: str) -> tuple[Path, str]:
@@ -93,6 +99,7 @@ class Run:
 
 
 def load_run(run_dir: Path) -> Run:
+    """Read a run directory's inputs; raise ReportError if it is not a run directory."""
     run_dir = Path(run_dir)
     if not run_dir.is_dir() or not any((run_dir / m).is_file() for m in RUN_MARKERS):
         raise ReportError(f'{run_dir} is not a run directory (it has none of '
@@ -111,6 +118,7 @@ def load_run(run_dir: Path) -> Run:
 # --- sections -----------------------------------------------------------------------------------
 
 def section_checks(run: Run) -> list[str]:
+    """Build section 1: the environment validation checklist from ``validation.json``."""
     if not run.validation:
         return missing('`validation.json` (the environment validation checklist)',
                        f'nav-gym-validate --json {run.shown}/validation.json')
@@ -126,6 +134,7 @@ def section_checks(run: Run) -> list[str]:
 
 
 def section_training(run: Run) -> list[str]:
+    """Build section 2: training information, hyperparameters and the training curves."""
     lines: list[str] = []
     summary, config = run.summary or {}, run.config or {}
     if not run.summary:
@@ -170,6 +179,7 @@ def section_training(run: Run) -> list[str]:
 
 
 def checkpoint_name(entry: dict[str, Any]) -> str:
+    """Name the policy of an evaluated set: its checkpoint file (with steps) or random."""
     if entry.get('policy') != 'dqn':
         return 'random policy'
     name = Path(str(entry.get('checkpoint') or 'final_model.zip')).name
@@ -178,6 +188,7 @@ def checkpoint_name(entry: dict[str, Any]) -> str:
 
 
 def summary_row(entry: dict[str, Any]) -> list[Any]:
+    """Return an evaluated set's row of the evaluation table (``EVAL_COLUMNS``)."""
     s = entry.get('summary', {})
     return [entry.get('label') or entry.get('name'), checkpoint_name(entry), entry.get('split'),
             s.get('episodes'), pct(s.get('success_rate')), pct(s.get('collision_rate')),
@@ -186,7 +197,10 @@ def summary_row(entry: dict[str, Any]) -> list[Any]:
 
 
 def final_set(run: Run, split: str, seeds: list[int] | None = None) -> dict[str, Any] | None:
-    """The final DQN set on a split; the one named ``dqn_<split>`` or with the same seeds first."""
+    """Return the final DQN set on a split, or None.
+
+    Sets with the same ``seeds`` come first, then the one named ``dqn_<split>``.
+    """
     found = [s for s in run.sets() if s.get('policy') == 'dqn' and s.get('split') == split
              and not str(s.get('name', '')).startswith('early_')]
     found.sort(key=lambda s: (sorted(s.get('seeds', [])) != sorted(seeds or []),
@@ -195,6 +209,7 @@ def final_set(run: Run, split: str, seeds: list[int] | None = None) -> dict[str,
 
 
 def section_early(run: Run) -> list[str]:
+    """Build section 3: each early checkpoint set against the final DQN, seed by seed."""
     early = [s for s in run.sets() if str(s.get('name', '')).startswith('early_')]
     if not early:
         return missing('an `early_*` set in `eval/results.json` (an early checkpoint evaluated on '
@@ -225,6 +240,7 @@ def section_early(run: Run) -> list[str]:
 
 
 def section_evaluation(run: Run) -> list[str]:
+    """Build section 4: the evaluation table, the missing required sets and each set's episodes."""
     if not run.sets():
         return missing('`eval/results.json` (deterministic evaluation)',
                        f'nav-eval-evaluate {run.shown}')
@@ -252,9 +268,9 @@ def section_evaluation(run: Run) -> list[str]:
 
 
 def load_traces(run: Run, set_name: str) -> list[tuple[Path, dict[str, Any]]]:
-    """The traces of one evaluated set, by seed."""
+    """Return the traces of one evaluated set, by seed."""
     found = []
-    for path in (run.path / 'eval' / 'traces' / set_name).glob('seed_*.json'):
+    for path in layout.trace_files(run.path / layout.EVAL, set_name):
         trace = run.read(str(path.relative_to(run.path)))
         if isinstance(trace, dict) and 'scenario' in trace:
             found.append((path, trace))
@@ -262,12 +278,16 @@ def load_traces(run: Run, set_name: str) -> list[tuple[Path, dict[str, Any]]]:
 
 
 def dqn_sets_for_examples(run: Run) -> list[dict[str, Any]]:
+    """Return the final DQN sets to take examples from: held-out first, then train."""
     return [s for s in (final_set(run, 'heldout'), final_set(run, 'train')) if s]
 
 
 def pick_examples(run: Run) -> tuple[Any, Any]:
-    """(successful, failed) (path, trace) pairs of the final DQN; the failure is the diagnosed
-    episode when its trace exists (the early checkpoint's when the final model never failed)."""
+    """Pick a successful and a failed (path, trace) pair of the final DQN, each or None.
+
+    The failure is the diagnosed episode when its trace exists (the early checkpoint's when the
+    final model never failed), else the first failure.
+    """
     traces = [t for s in dqn_sets_for_examples(run) for t in load_traces(run, s['name'])]
     success = next((t for t in traces if t[1].get('outcome') == 'success'), None)
     diagnosis = run.diagnosis or {}
@@ -282,6 +302,7 @@ def pick_examples(run: Run) -> tuple[Any, Any]:
 
 
 def section_trajectories(run: Run) -> list[str]:
+    """Build section 5: the trajectory grid, example paths and a contact sheet of frames."""
     arena = (run.results or {}).get('arena')
     sets = dqn_sets_for_examples(run)
     grid = [t for _, t in load_traces(run, sets[0]['name'])] if sets else []
@@ -310,7 +331,7 @@ def section_trajectories(run: Run) -> list[str]:
     # the diagnosis already shows the failure's frames: then show the success's
     order = (success, failed) if (run.diagnosis or {}).get('figures') else (failed, success)
     for path, trace in (e for e in order if e):
-        frames_file = path.with_name(f'{path.stem}_frames.npz')
+        frames_file = layout.frames_path(path)
         if not frames_file.is_file():
             continue
         with np.load(frames_file) as archive:
@@ -326,8 +347,88 @@ def section_trajectories(run: Run) -> list[str]:
                            f'nav-eval-evaluate {run.shown}')
 
 
+# --- rollout videos -----------------------------------------------------------------------------
+
+def diagnosed_episode(run: Run) -> tuple[str, int, str] | None:
+    """Name the diagnosed episode: (set, seed, how the report calls it).
+
+    From ``eval/diagnosis.json``; before there is one, the episode ``nav-eval-diagnose`` picks
+    by default; None when there is no failure to diagnose.
+    """
+    diagnosis = run.diagnosis or {}
+    if diagnosis.get('set') is not None and diagnosis.get('seed') is not None:
+        return str(diagnosis['set']), int(diagnosis['seed']), 'diagnosed'
+    try:
+        return (*pick_episode(run.path / 'eval', None, None), 'to diagnose')
+    except (DiagnosisError, KeyError, TypeError, ValueError):
+        return None
+
+
+def video_episodes(run: Run) -> list[tuple[str, Path, dict[str, Any]]]:
+    """List the episodes to show as videos: (caption, trace path, trace).
+
+    The report's success and failure examples (``pick_examples``) and the diagnosed episode,
+    each once.
+    """
+    success, failed = pick_examples(run)
+    chosen = [(role, *example) for role, example in (('Success', success), ('Failure', failed))
+              if example is not None]
+    diagnosed = diagnosed_episode(run)
+    if diagnosed is not None:
+        set_name, seed, how = diagnosed
+        same = [i for i, (_, _, t) in enumerate(chosen) if (t.get('set'), t.get('seed'))
+                == (set_name, seed)]
+        if same:
+            role, path, trace = chosen[same[0]]
+            chosen[same[0]] = (f'{role} ({how})', path, trace)
+        else:
+            chosen += [(how.capitalize(), path, trace)
+                       for path, trace in load_traces(run, set_name) if trace.get('seed') == seed]
+    return [(f"{role}: {t.get('set')} seed {t.get('seed')} ({t.get('outcome')}, "
+             f"{len(t.get('steps', []))} steps)", path, t) for role, path, t in chosen]
+
+
+def write_videos(run: Run, folder: Path) -> list[tuple[str, Path | None, str]]:
+    """Write the video of every episode ``video_episodes`` lists into ``folder``.
+
+    Returns (caption, video path or None, why not) per episode; older videos in ``folder``
+    are removed.
+    """
+    arena = (run.results or {}).get('arena')
+    episodes = video_episodes(run) if arena else []
+    for stale in Path(folder).glob('*.mp4'):
+        stale.unlink()
+    written: list[tuple[str, Path | None, str]] = []
+    for caption, path, trace in episodes:
+        try:
+            out = video.write_trace_video(path, trace, arena, folder)
+        except (OSError, RuntimeError, ValueError, KeyError) as exc:
+            written.append((caption, None, f'{type(exc).__name__}: {exc}'))
+            continue
+        written.append((caption, out, '' if out else f'no frames beside `{path.name}`'))
+    return written
+
+
+def section_videos(run: Run) -> list[str]:
+    """Link the rollout videos (``report/videos/``); Result.html embeds them as players."""
+    try:
+        written = write_videos(run, run.figures.parent / 'videos')
+    except (OSError, ValueError, RuntimeError, ImportError) as exc:  # no encoder, bad traces
+        # the rest of the section (the trajectories) stands without them
+        return [f'> **Could not make the rollout videos:** {type(exc).__name__}: {exc}', '']
+    if not written:
+        return []
+    lines = [f'**Rollout videos**: the policy observation (left) beside the top-down path so '
+             f'far (right), one frame per decision at {video.FPS} frames/s, labelled with the '
+             'step, action, reward, return, distance and outcome.', '']
+    for caption, out, problem in written:
+        lines += video_link(f'videos/{out.name}', caption) if out else [
+            f'{caption}: no video ({problem}).', '']
+    return lines
+
+
 def include_markdown(run: Run, source: Path, prefix: str) -> list[str]:
-    """A Markdown file verbatim; its relative images are copied next to the report."""
+    """Return a Markdown file's lines verbatim; its relative images are copied to the report."""
     def relink(match: re.Match[str]) -> str:
         target = match.group(2)
         for base in (source.parent, run.path):
@@ -342,6 +443,7 @@ def include_markdown(run: Run, source: Path, prefix: str) -> list[str]:
 
 
 def section_diagnosis(run: Run) -> list[str]:
+    """Build section 6: the failure diagnosis with the evidence figures it names."""
     source = run.path / 'eval' / 'diagnosis.md'
     diagnosis = run.diagnosis or {}
     if not source.is_file() and not diagnosis:
@@ -368,6 +470,7 @@ def section_diagnosis(run: Run) -> list[str]:
 
 
 def section_experiments(run: Run, experiments: Path | None) -> list[str]:
+    """Build section 7: the experiments log included verbatim."""
     if experiments is None:
         return missing('the experiments log (attempts and targeted improvements)',
                        f'nav-eval-report {run.shown} --experiments docs/experiments.md')
@@ -377,6 +480,7 @@ def section_experiments(run: Run, experiments: Path | None) -> list[str]:
 
 
 def default_commands(run: Run, experiments: Path | None = None) -> list[str]:
+    """Return the commands that reproduce the run, stage by stage (section 8)."""
     name = Path(run.shown).name
     log = f' --experiments {display_path(experiments)}' if experiments else ''
     return [f'nav-gym-validate --json {run.shown}/validation.json',
@@ -389,7 +493,7 @@ def default_commands(run: Run, experiments: Path | None = None) -> list[str]:
 
 
 def evidence(run: Run, experiments: Path | None) -> list[str]:
-    """The workshop's evidence checklist, with where each item is and whether it is there."""
+    """Build the workshop's evidence checklist, with where each item is and whether it is there."""
     names = ' '.join(str(c.get('name')) for c in run.validation or [])
     diagnosed = (run.path / 'eval' / 'diagnosis.md').is_file() or bool(run.diagnosis)
     items = [('Observation shape, dtype, min/max checks', 1, 'Observation' in names),
@@ -411,8 +515,12 @@ def evidence(run: Run, experiments: Path | None) -> list[str]:
 
 
 def build_markdown(run: Run, experiments: Path | None, commands: list[str] | None) -> str:
+    """Return the report's Markdown: header, evidence checklist and every section.
+
+    A section whose input is malformed says so instead of failing the report.
+    """
     bodies = (section_checks, section_training, section_early, section_evaluation,
-              section_trajectories, section_diagnosis,
+              lambda r: section_trajectories(r) + section_videos(r), section_diagnosis,
               lambda r: section_experiments(r, experiments),
               lambda r: ['```bash', *(commands or default_commands(r, experiments)), '```', ''])
     sections: list[str] = []
@@ -423,7 +531,7 @@ def build_markdown(run: Run, experiments: Path | None, commands: list[str] | Non
             lines = [f'> **Could not build this section:** {type(exc).__name__}: {exc}', '']
         sections += [f'## {title}', '', *lines]
     header = [f'# Result: {Path(run.shown).name}', '',
-              f"Run directory `{run.shown}`; report written {datetime.now():%Y-%m-%d %H:%M} by "
+              f'Run directory `{run.shown}`; report written {datetime.now():%Y-%m-%d %H:%M} by '
               '`nav-eval-report`.', '', *evidence(run, experiments)]
     for problem in run.problems:
         header += [f'> **Unreadable input:** {problem}', '']
@@ -448,6 +556,7 @@ def write_report(run_dir: Path, experiments: Path | None = None,
 # --- command ------------------------------------------------------------------------------------
 
 def main(argv: list[str] | None = None) -> None:
+    """Run the ``nav-eval-report`` command: write the report and print its paths."""
     parser = argparse.ArgumentParser(prog='nav-eval-report', description=__doc__.splitlines()[0])
     parser.add_argument('run_dir', type=Path, help='run directory made by nav-gym-train')
     parser.add_argument('--experiments', type=Path, metavar='FILE',

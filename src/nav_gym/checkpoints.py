@@ -1,5 +1,7 @@
-"""Checkpoint file names of a training run (no ROS, no torch): the one definition shared by
-training, evaluation and the report."""
+"""Checkpoint file names of a training run (no ROS, no torch).
+
+The one definition shared by training, evaluation and the report.
+"""
 
 from __future__ import annotations
 
@@ -10,7 +12,7 @@ CHECKPOINT_RE = re.compile(r'dqn_(\d+)_steps\.zip$')
 
 
 def checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
-    """(steps, path) of the run's ``checkpoints/dqn_<steps>_steps.zip`` files, oldest first."""
+    """Return (steps, path) of the run's ``checkpoints/dqn_<steps>_steps.zip``, oldest first."""
     found = []
     for path in (Path(run_dir) / 'checkpoints').glob('dqn_*_steps.zip'):
         match = CHECKPOINT_RE.search(path.name)

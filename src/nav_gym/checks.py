@@ -31,6 +31,7 @@ class Check:
 
 
 def heading_error(pose: tuple[float, float, float], goal: tuple[float, float]) -> float:
+    """Return the signed angle (radians, in [-pi, pi]) from the robot's heading to the goal."""
     bearing = math.atan2(goal[1] - pose[1], goal[0] - pose[0])
     return math.remainder(bearing - pose[2], 2 * math.pi)
 
@@ -68,6 +69,7 @@ def drive_forward(env: NavigationEnv, seed: int, max_steps: int = 400) -> list[d
 
 
 def check_observation(env: NavigationEnv) -> list[Check]:
+    """Check the observation's shape, dtype and range and that the action space is Discrete(3)."""
     obs, _ = env.reset(seed=101)
     after, *_ = env.step(FORWARD)
     ok_space = env.observation_space.contains(obs) and env.observation_space.contains(after)
@@ -108,6 +110,7 @@ def check_actions(env: NavigationEnv) -> Check:
 
 
 def check_reset(env: NavigationEnv) -> Check:
+    """Check that a seed reproduces its scenario and first image and another seed differs."""
     a, info_a = env.reset(seed=205, options={'split': 'heldout'})
     env.step(FORWARD)
     b, info_b = env.reset(seed=205, options={'split': 'heldout'})
@@ -122,6 +125,10 @@ def check_reset(env: NavigationEnv) -> Check:
 
 
 def check_boundaries(env: NavigationEnv) -> tuple[list[Check], list[list[float]]]:
+    """Check goal and collision detection by driving scripted episodes.
+
+    Return the two checks and the wheel speeds reported at those episode boundaries.
+    """
     seed, trace = drive_to_goal(env, range(101, 131))
     last = trace[-1] if trace else {}
     goal = Check('Goal detection', 'terminated=True, +5 goal reward, motors stopped',
@@ -144,6 +151,10 @@ def check_boundaries(env: NavigationEnv) -> tuple[list[Check], list[list[float]]
 
 
 def check_timeout(make_env: Callable[..., NavigationEnv], namespace: str) -> tuple[Check, list]:
+    """Check truncation at max_episode_steps on a 5-step env attached to the same sim.
+
+    Return the check and the wheel speeds reported after stopping the motors.
+    """
     short = make_env(max_episode_steps=5, sim='attach', namespace=namespace)
     try:
         short.reset(seed=104)
@@ -157,8 +168,11 @@ def check_timeout(make_env: Callable[..., NavigationEnv], namespace: str) -> tup
 
 
 def check_checkers(env: NavigationEnv) -> list[Check]:
-    """SB3's and Gymnasium's checkers; the latter on a ``gymnasium.make`` env (it has a spec,
-    so the checker also tries the rgb_array render mode) attached to the same sim."""
+    """Run SB3's and Gymnasium's env checkers, one check each.
+
+    Gymnasium's runs on a ``gymnasium.make`` env attached to the same sim (it has a spec, so the
+    checker also tries the rgb_array render mode).
+    """
     import gymnasium as gym
     from gymnasium.utils.env_checker import check_env as gymnasium_check
     from stable_baselines3.common.env_checker import check_env as sb3_check
@@ -185,7 +199,7 @@ def check_checkers(env: NavigationEnv) -> list[Check]:
 
 
 def run_checklist(env: NavigationEnv, make_env: Callable[..., NavigationEnv]) -> list[Check]:
-    """The workshop's validation checklist, in its order, with measured values."""
+    """Run the workshop's validation checklist, in its order, with measured values."""
     checks = check_observation(env)
     checks.append(check_actions(env))
     checks.append(check_reset(env))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from nav_gym.config import SIM_MODES, EnvConfig
@@ -13,6 +13,7 @@ from nav_sim.errors import NavSimError
 
 
 def add_env_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the options that say how to reach the sim (namespace, attach/embedded, time-out)."""
     parser.add_argument('--namespace', default='', help='ROS namespace of the sim node')
     parser.add_argument('--sim', choices=SIM_MODES, default='auto',
                         help="attach to a running sim, start one ('embedded'), or 'auto'")
@@ -21,15 +22,27 @@ def add_env_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def env_config(args: argparse.Namespace, **extra: Any) -> EnvConfig:
+    """Return the EnvConfig of the env options (and ``extra`` settings)."""
     return EnvConfig(namespace=args.namespace, sim=args.sim, sim_timeout=args.sim_timeout,
                      **extra)
 
 
-def strip_ros_args(argv: list[str] | None) -> list[str]:
-    """The command's own arguments: drop a trailing ``--ros-args ...`` block (ros2 run passes
-    it through)."""
-    args = list(sys.argv[1:] if argv is None else argv)
-    return args[:args.index('--ros-args')] if '--ros-args' in args else args
+def strip_ros_args(argv: Sequence[str] | None) -> list[str]:
+    """Return the command's own arguments: ``argv`` without its ``--ros-args ... [--]`` blocks.
+
+    ``argv`` defaults to ``sys.argv[1:]``; ``ros2 run`` passes such blocks through and ``--``
+    ends one.  The one definition every command uses.
+    """
+    out: list[str] = []
+    inside = False
+    for arg in sys.argv[1:] if argv is None else argv:
+        if arg == '--ros-args':
+            inside = True
+        elif inside and arg == '--':
+            inside = False
+        elif not inside:
+            out.append(arg)
+    return out
 
 
 def run_command(name: str, body: Callable[[], int]) -> None:
@@ -42,4 +55,7 @@ def run_command(name: str, body: Callable[[], int]) -> None:
     except KeyboardInterrupt:
         print(f'{name}: interrupted', file=sys.stderr)
         code = 130
+    except OSError as exc:  # a file the command needs cannot be read or written
+        print(f'{name}: error: {exc}', file=sys.stderr)
+        code = 1
     sys.exit(code)

@@ -22,8 +22,10 @@ class EnvConfig:
     namespace: str = _f('', "ROS namespace of the sim node ('' = root, or a unique one when "
                         'the env starts its own)')
     sim: str = _f('auto', "'auto': attach to a sim answering in the namespace, else start one; "
-                  "'attach': require a running sim; 'embedded': always start one")
-    probe_timeout: float = _f(1.5, "seconds 'auto' looks for a running sim before starting one")
+                  "'attach': require a running sim; 'embedded': start one (never a second in "
+                  'a namespace: two sims there are refused)')
+    probe_timeout: float = _f(1.5, "seconds 'auto' (and 'embedded' in a given namespace) looks "
+                              'for a running sim before starting one')
     sim_timeout: float = _f(5.0, 'seconds to wait for the sim before a clear error')
     split: str = _f('train', "scenario bank: 'train' or 'heldout' (reset options may override)")
     max_episode_steps: int = _f(100, 'control periods before an episode is truncated '
@@ -40,6 +42,7 @@ class EnvConfig:
                           '0.016})')
 
     def __post_init__(self) -> None:
+        """Refuse settings the env cannot work with (TrainConfigError)."""
         if self.sim not in SIM_MODES:
             raise TrainConfigError(f'sim must be one of {list(SIM_MODES)}, got {self.sim!r}')
         if int(self.max_episode_steps) < 1:

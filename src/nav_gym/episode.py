@@ -18,6 +18,7 @@ SCRIPT = [0] * 3 + [1] * 2 + [2] * 4 + [1] * 2 + [0] * 3 + [1] * 4
 
 
 def scripted_episode(args: argparse.Namespace) -> int:
+    """Drive one scripted episode, printing every transition; return the exit code."""
     env = NavigationEnv(env_config(args, max_episode_steps=len(SCRIPT)))
     try:
         _, info = env.reset(seed=args.seed, options={'split': args.split})
@@ -46,6 +47,7 @@ def scripted_episode(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Run the ``nav-gym-episode`` command."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_env_arguments(parser)
     parser.add_argument('--seed', type=int, default=101)

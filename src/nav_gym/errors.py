@@ -25,3 +25,11 @@ class CheckpointError(NavGymError, RuntimeError):
 
 class TrainConfigError(NavGymError, ValueError):
     """A training configuration value is invalid."""
+
+
+class DiskFullError(CheckpointError):
+    """A save ran out of disk space (the message names the file and the space it needs)."""
+
+
+class TrainingError(NavGymError, RuntimeError):
+    """Training stopped early (e.g. its sim died) after saving a checkpoint to resume from."""

@@ -55,6 +55,6 @@ def rgb_to_observation(rgb: np.ndarray) -> np.ndarray:
 
 
 def image_msg_to_observation(msg: object) -> tuple[np.ndarray, np.ndarray]:
-    """A sensor_msgs/Image (duck-typed) -> (observation, native RGB image)."""
+    """Convert a sensor_msgs/Image (duck-typed) to (observation, native RGB image)."""
     rgb = image_to_rgb(msg.data, msg.height, msg.width, msg.encoding, msg.step)  # type: ignore[attr-defined]
     return rgb_to_observation(rgb), rgb

@@ -14,11 +14,13 @@ class EnvTimer(gym.Wrapper):
     """Accumulates the seconds spent inside ``reset()`` and ``step()``."""
 
     def __init__(self, env: gym.Env) -> None:
+        """Wrap ``env`` with zeroed counters."""
         super().__init__(env)
         self.env_seconds = 0.0
         self.env_steps = 0
 
     def reset(self, **kwargs: Any) -> Any:
+        """Reset the env, timed."""
         start = time.perf_counter()
         try:
             return self.env.reset(**kwargs)
@@ -26,6 +28,7 @@ class EnvTimer(gym.Wrapper):
             self.env_seconds += time.perf_counter() - start
 
     def step(self, action: Any) -> Any:
+        """Step the env, timed."""
         start = time.perf_counter()
         try:
             return self.env.step(action)
@@ -39,9 +42,13 @@ def quiet_learner_threads() -> str:
 
     libgomp keeps idle worker threads spinning for a while after each parallel region.  With
     ``train_freq`` 4 the learner's threads then spin through the env steps in between and take
-    the CPU from the sim process.  ``benchmarks/bench_env.py`` compares both on 2 cores: the
-    env's share of DQN training time was 19 % with passive waits against 22 % with spinning;
-    the total wall-clock time did not differ beyond the run-to-run noise (about 10 %).
+    the CPU from the sim process (and from each other when the cores are shared).  The default
+    is chosen by wall-clock time, not by the env's share (a slower learner lowers the share):
+    ``benchmarks/bench_env.py`` on 2 cores shared with other work (load average 4-9), 2,000
+    DQN steps, 5 alternating runs each: passive 27-55 s (mean 41.5 s), libgomp's default
+    102-271 s (mean 178 s).  On a quiet machine one earlier measurement had passive 14 % slower
+    (65.5 s vs 57.5 s for 4,000 steps); spinning costs far more under contention than passive
+    waits cost on an idle machine, so passive is the default.
 
     Call it before torch is first imported (OpenMP reads the variable once).  A policy the user
     set wins.  Returns the policy in effect, recorded with a run's timing figures.

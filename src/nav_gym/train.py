@@ -5,64 +5,137 @@
 
 A run directory holds: ``config.yaml`` (effective settings), ``monitor.csv``, ``tb/``
 (TensorBoard), ``checkpoints/dqn_<steps>_steps.zip`` (every ``checkpoint_freq`` steps, all kept,
-written atomically) with the latest replay buffer, ``final_model.zip`` and ``summary.json``
-(wall-clock time, steps/s, the environment's share of the time).  Ctrl-C saves a checkpoint.
+written atomically) with the replay buffer of the latest one (only while it serves resume),
+``final_model.zip`` and ``summary.json`` (wall-clock time, steps/s, the environment's share of
+the time).
+
+At the end of training the final model and the summary are written first, then the last
+checkpoint; the replay buffer is then deleted (``--keep-replay-buffer true`` keeps it).  Ctrl-C
+at any moment, a sim that dies and a full disk all leave a resumable run (every file is
+written to a temporary file and renamed; a temporary file is removed on every error) and say
+how to resume.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import errno
 import json
 import os
 import signal
 import sys
 import time
 import zipfile
-from dataclasses import asdict
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
+from nav_gym import run_dir as layout
 from nav_gym import train_config
 from nav_gym.checkpoints import checkpoints
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.env import NavigationEnv
-from nav_gym.errors import CheckpointError
+from nav_gym.errors import CheckpointError, DiskFullError, TrainConfigError, TrainingError
+from nav_gym.live_hooks import add_live_argument, timed_dqn, training_callback
 from nav_gym.timing import EnvTimer, quiet_learner_threads
 from nav_gym.train_config import TrainConfig
+from nav_sim.errors import NavSimError
 
-REPLAY_BUFFER = 'replay_buffer.pkl'
-REPLAY_BUFFER_STEP = 'replay_buffer.step'
+REPLAY_BUFFER = layout.REPLAY_BUFFER
+REPLAY_BUFFER_STEP = layout.REPLAY_BUFFER_STEP
+RESUME_COMMAND = 'nav-gym-train --resume'
+#: fault injection for the test suite: the name of a file whose save pauses (before the
+#: rename) until a signal arrives, once per process
+PAUSE_SAVE_ENV = 'VISNAV_TEST_PAUSE_SAVE'
+_paused: set[str] = set()
 
 
-def atomic_write(path: Path, write: Any) -> None:
-    """Write through ``write(fileobj)`` to a temporary file, fsync, then rename over ``path``."""
+def atomic_write(path: Path, write: Callable[[Any], Any], size_hint: int | None = None) -> None:
+    """Write through ``write(fileobj)`` to a temporary file, fsync, then rename over ``path``.
+
+    The temporary file is removed on any error, Ctrl-C included.  A full disk raises
+    DiskFullError naming the file and ``size_hint`` (bytes the file needs, if known).
+    """
     tmp = path.with_name(f'.{path.name}.tmp')
-    with open(tmp, 'wb') as handle:
-        write(handle)
-        handle.flush()
-        os.fsync(handle.fileno())
-    os.replace(tmp, path)
+    try:
+        with open(tmp, 'wb') as handle:
+            write(handle)
+            _pause_for_test(path)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(tmp, path)
+    except BaseException as exc:
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        if isinstance(exc, OSError) and exc.errno == errno.ENOSPC:
+            need = f'about {_size(size_hint)}' if size_hint else 'more space'
+            raise DiskFullError(f'no space left on the device while writing {path}: it needs '
+                                f'{need}; free some space') from None
+        raise
+
+
+def _pause_for_test(path: Path) -> None:
+    if os.environ.get(PAUSE_SAVE_ENV) == path.name and path.name not in _paused:
+        _paused.add(path.name)
+        print(f'saving {path}: paused ({PAUSE_SAVE_ENV})', flush=True)
+        signal.pause()
+
+
+def _size(nbytes: float) -> str:
+    for unit in ('bytes', 'kB', 'MB', 'GB'):
+        if nbytes < 1000 or unit == 'GB':
+            return f'{nbytes:.0f} {unit}' if unit == 'bytes' else f'{nbytes:.1f} {unit}'
+        nbytes /= 1000
+    return ''
+
+
+def write_text(path: Path, text: str) -> None:
+    """Write a small text file atomically."""
+    atomic_write(path, lambda handle: handle.write(text.encode()))
+
+
+def buffer_nbytes(buffer: Any) -> int:
+    """Return the bytes a replay buffer's arrays hold (what saving it needs, roughly)."""
+    return sum(int(getattr(value, 'nbytes', 0)) for value in vars(buffer).values())
 
 
 def save_checkpoint(model: Any, run_dir: Path, with_buffer: bool) -> Path:
-    folder = run_dir / 'checkpoints'
+    """Save ``checkpoints/dqn_<steps>_steps.zip`` (and the replay buffer that belongs to it)."""
+    folder = run_dir / layout.CHECKPOINTS
     folder.mkdir(parents=True, exist_ok=True)
     path = folder / f'dqn_{model.num_timesteps}_steps.zip'
-    atomic_write(path, model.save)
+    found = checkpoints(run_dir)
+    atomic_write(path, model.save, found[-1][1].stat().st_size if found else None)
     if with_buffer:
-        atomic_write(folder / REPLAY_BUFFER, model.save_replay_buffer)
-        # which checkpoint the buffer belongs to: resume loads it only with that one
-        atomic_write(folder / REPLAY_BUFFER_STEP,
-                     lambda h: h.write(str(model.num_timesteps).encode()))
+        save_replay_buffer(model, folder)
     return path
 
 
+def save_replay_buffer(model: Any, folder: Path) -> None:
+    """Replace the replay buffer; its step marker exists only while the two belong together."""
+    marker = folder / REPLAY_BUFFER_STEP
+    marker.unlink(missing_ok=True)
+    atomic_write(folder / REPLAY_BUFFER, model.save_replay_buffer,
+                 buffer_nbytes(model.replay_buffer))
+    write_text(marker, str(model.num_timesteps))
+
+
+def delete_replay_buffer(run_dir: Path) -> None:
+    """Delete the replay buffer and its step marker (marker first)."""
+    folder = run_dir / layout.CHECKPOINTS
+    (folder / REPLAY_BUFFER_STEP).unlink(missing_ok=True)
+    (folder / REPLAY_BUFFER).unlink(missing_ok=True)
+
+
 def load_model(path: Path, env: Any, device: str) -> Any:
-    """Load a DQN checkpoint or raise CheckpointError saying what to do."""
-    from stable_baselines3 import DQN
+    """Load a DQN checkpoint (timed as :func:`build_model`'s) or raise CheckpointError."""
     try:
-        return DQN.load(path, env=env, device=device)
+        return timed_dqn(env.unwrapped.timing if env is not None else None).load(
+            path, env=env, device=device)
     except (zipfile.BadZipFile, EOFError, KeyError, ValueError, RuntimeError, OSError,
             AssertionError) as exc:
         raise CheckpointError(
@@ -71,6 +144,7 @@ def load_model(path: Path, env: Any, device: str) -> Any:
 
 
 def make_callback(config: TrainConfig, run_dir: Path) -> Any:
+    """Return the SB3 callback that saves a checkpoint every ``checkpoint_freq`` steps."""
     from stable_baselines3.common.callbacks import BaseCallback
 
     class AtomicCheckpoint(BaseCallback):
@@ -86,18 +160,24 @@ def make_callback(config: TrainConfig, run_dir: Path) -> Any:
 
 
 def new_run_dir(config: TrainConfig) -> Path:
+    """Create the directory of a new run, or raise a one-line error."""
     name = config.run_name or datetime.now().strftime('dqn_%Y%m%d_%H%M%S')
     run_dir = Path(config.runs_dir) / name
-    if (run_dir / 'config.yaml').exists():
+    if (run_dir / layout.CONFIG).exists():
         raise CheckpointError(f'{run_dir} already holds a run: resume it with --resume '
                               f'{run_dir}, or choose another --run-name')
-    run_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise TrainConfigError(f'cannot create the run directory {run_dir} ({exc.strerror}); '
+                               'choose another --runs-dir') from None
     return run_dir
 
 
 def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> tuple[Any, EnvTimer]:
+    """Return ``Monitor(EnvTimer(NavigationEnv))`` writing the run's monitor.csv."""
     from stable_baselines3.common.monitor import Monitor
-    monitor_file = run_dir / 'monitor.csv'
+    monitor_file = run_dir / layout.MONITOR
     timer = EnvTimer(NavigationEnv(config.env_config()))
     # a resumed run appends to its Monitor CSV (SB3 writes the header only for a new file)
     env = Monitor(timer, str(monitor_file), info_keywords=('is_success', 'event'),
@@ -106,21 +186,22 @@ def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> tuple[Any, En
 
 
 def build_model(config: TrainConfig, run_dir: Path, env: Any, resume: bool) -> Any:
-    from stable_baselines3 import DQN
+    """Return a new DQN, or the newest checkpoint's with its replay buffer when it has one."""
     if not resume:
-        return DQN('CnnPolicy', env, tensorboard_log=str(run_dir / 'tb'), verbose=0,
-                   **config.dqn_kwargs())
+        # the learner's share of every env step is counted into the env's step budget
+        return timed_dqn(env.unwrapped.timing)('CnnPolicy', env,
+                                               tensorboard_log=str(run_dir / 'tb'), verbose=0,
+                                               **config.dqn_kwargs())
     found = checkpoints(run_dir)
     if not found:
-        raise CheckpointError(f'no checkpoint in {run_dir / "checkpoints"} to resume from')
+        raise CheckpointError(f'no checkpoint in {run_dir / layout.CHECKPOINTS} to resume from')
     steps, path = found[-1]
     model = load_model(path, env, config.device)
     model.tensorboard_log = str(run_dir / 'tb')
-    buffer = run_dir / 'checkpoints' / REPLAY_BUFFER
-    buffer_step = _buffer_step(run_dir / 'checkpoints' / REPLAY_BUFFER_STEP)
+    buffer = run_dir / layout.CHECKPOINTS / REPLAY_BUFFER
+    buffer_step = _buffer_step(run_dir / layout.CHECKPOINTS / REPLAY_BUFFER_STEP)
     if config.save_replay_buffer and buffer.exists() and buffer_step != steps:
-        note = (f'without a replay buffer (the saved one belongs to step {buffer_step}, not to '
-                f'this checkpoint)')
+        note = ('without a replay buffer (the saved one does not belong to this checkpoint)')
     elif config.save_replay_buffer and buffer.exists():
         try:
             model.load_replay_buffer(buffer)
@@ -142,54 +223,148 @@ def _buffer_step(path: Path) -> int | None:
         return None
 
 
-def train(config: TrainConfig, run_dir: Path, resume: bool = False) -> dict[str, Any]:
-    """Train (or continue) a run; returns the summary it writes."""
+def train(config: TrainConfig, run_dir: Path, resume: bool = False, *,
+          resume_command: str = RESUME_COMMAND, live_port: int = 0) -> dict[str, Any]:
+    """Train (or continue) a run; returns the summary it writes.
+
+    Ctrl-C returns a summary with ``interrupted`` set after saving a checkpoint; a sim that
+    dies raises TrainingError after saving one; either message says how to resume (with
+    ``resume_command RUN_DIR``).
+    """
     config = config.with_full_sim_params()
-    (run_dir / 'config.yaml').write_text(config.to_yaml())
+    hint = f'continue with: {resume_command} {run_dir}'
+    if resume and not checkpoints(run_dir):  # stopped before its first checkpoint
+        print(f'{run_dir} has no checkpoint yet: training starts from step 0', flush=True)
+        resume = False
+    try:
+        return _train(config, run_dir, resume, hint, live_port)
+    except DiskFullError as exc:
+        raise DiskFullError(f'{exc}, then {hint}') from None
+    except KeyboardInterrupt:  # before learning started (or while closing the env)
+        print(f'\ninterrupted; {hint}', flush=True)
+        raise
+
+
+def _train(config: TrainConfig, run_dir: Path, resume: bool, hint: str,
+           live_port: int = 0) -> dict[str, Any]:
+    write_text(run_dir / layout.CONFIG, config.to_yaml())
     env = None
-    interrupted = False
     start = time.perf_counter()
     try:
         env, timer = build_env(config, run_dir, resume)
+        if live_port:  # --live: this process serves the Foxglove live view
+            print(f'live view: open {env.unwrapped.start_live(live_port)} in Foxglove', flush=True)
         model = build_model(config, run_dir, env, resume)
         steps_before = model.num_timesteps
-        remaining = max(config.total_timesteps - steps_before, 0)
         if not resume:
             save_checkpoint(model, run_dir, with_buffer=False)  # step-0 reference
+        failure = None
         try:
-            model.learn(remaining, callback=make_callback(config, run_dir),
-                        reset_num_timesteps=not resume, tb_log_name='dqn',
-                        progress_bar=sys.stdout.isatty())
+            model.learn(max(config.total_timesteps - steps_before, 0),
+                        callback=[make_callback(config, run_dir),
+                                  training_callback(env.unwrapped)],
+                        reset_num_timesteps=not resume,
+                        tb_log_name='dqn', progress_bar=sys.stdout.isatty())
+            outcome = 'finished'
         except KeyboardInterrupt:
-            interrupted = True
-            path = save_checkpoint(model, run_dir, config.save_replay_buffer)
-            print(f'\ninterrupted at step {model.num_timesteps}: checkpoint {path}; continue '
-                  f'with: nav-gym-train --resume {run_dir}', flush=True)
-        else:
-            save_checkpoint(model, run_dir, config.save_replay_buffer)
-            atomic_write(run_dir / 'final_model.zip', model.save)
-        wall = time.perf_counter() - start
-        steps = model.num_timesteps - steps_before
+            outcome = 'interrupted'
+        except NavSimError as exc:  # the sim died or stopped answering
+            outcome, failure = 'sim failed', _sim_failure(timer, exc)
+        summary = _summary(config, run_dir, resume, outcome, model, steps_before,
+                           time.perf_counter() - start, timer, env)
+        saved: list[str] = []
+        try:
+            path = _save(model, config, run_dir, summary, saved)
+        except KeyboardInterrupt:
+            summary['interrupted'] = True
+            state = ('the run is complete (final_model.zip, summary.json)' if saved else
+                     'the run resumes from its newest complete checkpoint')
+            print(f'\ninterrupted while saving at step {model.num_timesteps}: {state}; {hint}',
+                  flush=True)
+            return summary
     finally:
         if env is not None:
             env.close()
-    summary = {
-        'run_dir': str(run_dir), 'interrupted': interrupted, 'resumed': resume,
-        'total_timesteps': config.total_timesteps, 'num_timesteps': model.num_timesteps,
-        'steps_this_session': steps, 'wall_clock_s': round(wall, 2),
+    if failure is not None:
+        raise TrainingError(f'{failure}; saved {path} (step {model.num_timesteps}); {hint}')
+    if outcome == 'interrupted':
+        print(f'\ninterrupted at step {model.num_timesteps}: checkpoint {path}; {hint}',
+              flush=True)
+    return summary
+
+
+def _sim_failure(timer: EnvTimer, exc: NavSimError) -> str:
+    """Say what happened to the sim: the embedded one's exit code and log tail, if it died."""
+    died = timer.unwrapped.sim_failure()
+    if died is not None:
+        return f'the embedded sim died ({died})'
+    return f'the sim stopped answering ({exc})'
+
+
+def _save(model: Any, config: TrainConfig, run_dir: Path, summary: dict[str, Any],
+          saved: list[str]) -> Path:
+    """Save the end of a session and return the checkpoint written.
+
+    A finished run writes its final model and summary first (then appends 'final' to
+    ``saved``), deletes or keeps the replay buffer, and makes its last checkpoint a hard link
+    of the final model (the same file: 27 MB less on disk).
+    """
+    if summary['interrupted']:
+        path = save_checkpoint(model, run_dir, config.save_replay_buffer)
+        _write_summary(run_dir, summary)
+        return path
+    final = run_dir / layout.FINAL_MODEL
+    atomic_write(final, model.save)
+    _write_summary(run_dir, summary)
+    saved.append('final')
+    keep = config.save_replay_buffer and config.keep_replay_buffer
+    if not keep:
+        delete_replay_buffer(run_dir)  # a finished run does not need it (see README)
+    path = run_dir / layout.CHECKPOINTS / f'dqn_{model.num_timesteps}_steps.zip'
+    if not _link(final, path):
+        save_checkpoint(model, run_dir, with_buffer=False)
+    if keep:
+        save_replay_buffer(model, path.parent)
+    return path
+
+
+def _link(source: Path, path: Path) -> bool:
+    """Make ``path`` a hard link of ``source`` atomically; False where links are refused."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f'.{path.name}.tmp')
+    try:
+        tmp.unlink(missing_ok=True)
+        os.link(source, tmp)
+        os.replace(tmp, path)
+    except BaseException as exc:
+        tmp.unlink(missing_ok=True)
+        if isinstance(exc, OSError):
+            return False
+        raise
+    return True
+
+
+def _summary(config: TrainConfig, run_dir: Path, resume: bool, outcome: str, model: Any,
+             steps_before: int, wall: float, timer: EnvTimer, env: Any) -> dict[str, Any]:
+    steps = model.num_timesteps - steps_before
+    return {
+        'run_dir': str(run_dir), 'interrupted': outcome != 'finished', 'outcome': outcome,
+        'resumed': resume, 'total_timesteps': config.total_timesteps,
+        'num_timesteps': model.num_timesteps, 'steps_this_session': steps,
+        'wall_clock_s': round(wall, 2),
         'steps_per_s': round(steps / wall, 2) if wall > 0 else None,
         'env_time_s': round(timer.env_seconds, 2),
         'env_share': round(timer.env_seconds / wall, 4) if wall > 0 else None,
         'omp_wait_policy': os.environ.get('OMP_WAIT_POLICY', 'default'),
         'episodes': len(env.get_episode_rewards()),
-        'config': asdict(config),
+        # mean ms per step: env phases, the learner's share, the sim's period (/diagnostics)
+        'time_budget': env.unwrapped.time_budget(),
+        'config': dataclasses.asdict(config),
     }
-    _write_summary(run_dir, summary)
-    return summary
 
 
 def _write_summary(run_dir: Path, summary: dict[str, Any]) -> None:
-    path = run_dir / 'summary.json'
+    path = run_dir / layout.SUMMARY
     sessions = []
     if path.exists():
         try:
@@ -199,15 +374,17 @@ def _write_summary(run_dir: Path, summary: dict[str, Any]) -> None:
     sessions.append({k: v for k, v in summary.items() if k != 'config'})
     summary = {**summary, 'sessions': sessions,
                'wall_clock_total_s': round(sum(s['wall_clock_s'] for s in sessions), 2)}
-    atomic_write(path, lambda h: h.write(json.dumps(summary, indent=2).encode()))
+    write_text(path, json.dumps(summary, indent=2))
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Run the ``nav-gym-train`` command."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--config', help='YAML file with settings (see config/train.yaml)')
     parser.add_argument('--resume', metavar='RUN_DIR', help='continue a run from its newest '
                         'checkpoint (its config.yaml is the base; flags still override)')
     train_config.add_arguments(parser)
+    add_live_argument(parser)
     args = parser.parse_args(strip_ros_args(argv))
     overrides = {k: v for k, v in vars(args).items() if k in train_config.FIELDS}
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
@@ -216,15 +393,13 @@ def main(argv: list[str] | None = None) -> None:
     def body() -> int:
         if args.resume:
             run_dir = Path(args.resume)
-            if not (run_dir / 'config.yaml').is_file():
-                raise CheckpointError(f'{run_dir} is not a run directory (no config.yaml)')
-            base = train_config.load_yaml(run_dir / 'config.yaml')
+            base = dataclasses.asdict(layout.load_config(run_dir))
             config = train_config.build(args.config, overrides, base)
         else:
             config = train_config.build(args.config, overrides)
             run_dir = new_run_dir(config)
         print(f'run directory: {run_dir}', flush=True)
-        summary = train(config, run_dir, resume=bool(args.resume))
+        summary = train(config, run_dir, resume=bool(args.resume), live_port=args.live)
         print(f"trained {summary['steps_this_session']} steps in {summary['wall_clock_s']} s "
               f"({summary['steps_per_s']} steps/s, env share {summary['env_share']:.1%}); "
               f"episodes: {summary['episodes']}")

@@ -1,5 +1,7 @@
-"""Training configuration: the workshop's DQN settings, overridable from YAML and the command
-line; the effective configuration is saved with each run."""
+"""Training configuration: the workshop's DQN settings and the run's whole EnvConfig.
+
+Overridable from YAML and the command line; the effective configuration is saved with each run.
+"""
 
 from __future__ import annotations
 
@@ -13,13 +15,20 @@ import yaml
 
 from nav_gym.config import EnvConfig
 from nav_gym.errors import TrainConfigError
-from nav_sim.config import SimConfig
+from nav_sim.config import SimConfig, convert
 from nav_sim.errors import ConfigError
 from nav_sim.sim_process import typed_params
+
+_ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
 
 
 def _f(default: Any, help: str) -> Any:
     return field(default=default, metadata={'help': help})
+
+
+def _env(name: str) -> Any:
+    """Declare a field with the default and description of the EnvConfig field ``name``."""
+    return _f(_ENV_FIELDS[name].default, _ENV_FIELDS[name].metadata['help'])
 
 
 @dataclass(frozen=True)
@@ -41,6 +50,8 @@ class TrainConfig:
     seed: int = _f(9, 'seed of DQN, the env and its scenario sequence')
     checkpoint_freq: int = _f(10_000, 'steps between checkpoints (all are kept)')
     save_replay_buffer: bool = _f(True, 'save the replay buffer with checkpoints (for --resume)')
+    keep_replay_buffer: bool = _f(False, 'keep checkpoints/replay_buffer.pkl when the run '
+                                  'finishes (it is only needed to resume; ~2 GB at 50k)')
     device: str = _f('auto', "torch device: 'auto', 'cpu' or 'cuda'")
     runs_dir: str = _f('runs', 'directory that holds one sub-directory per run')
     run_name: str = _f('', "run directory name ('' = dqn_<date>_<time>)")
@@ -50,14 +61,20 @@ class TrainConfig:
     namespace: str = _f('', 'ROS namespace of the sim node')
     sim: str = _f('auto', "'auto', 'attach' or 'embedded' (see EnvConfig)")
     sim_timeout: float = _f(5.0, 'seconds to wait for the sim before failing')
+    probe_timeout: float = _env('probe_timeout')
     forward_speed: float = _f(EnvConfig.forward_speed, 'action 1 (forward): linear velocity, m/s')
     turn_rate: float = _f(EnvConfig.turn_rate, 'actions 0/2: angular velocity, rad/s')
     turn_speed: float = _f(EnvConfig.turn_speed, 'actions 0/2: linear velocity while turning, '
                            'm/s (0: in place)')
+    progress_weight: float = _env('progress_weight')
+    step_penalty: float = _env('step_penalty')
+    goal_reward: float = _env('goal_reward')
+    collision_penalty: float = _env('collision_penalty')
     sim_params: dict = _f(None, 'sim_node parameters for a sim the env starts itself, as a '
                           'mapping (YAML) or JSON on the command line, e.g. \'{"sim_dt": 0.016}\'')
 
     def __post_init__(self) -> None:
+        """Check the values (a clear TrainConfigError for a bad one)."""
         for name in ('total_timesteps', 'buffer_size', 'batch_size', 'train_freq',
                      'gradient_steps', 'target_update_interval', 'checkpoint_freq'):
             if int(getattr(self, name)) < 1:
@@ -71,14 +88,14 @@ class TrainConfig:
         if not isinstance(self.sim_params, dict):
             raise TrainConfigError(f'sim_params must be a mapping, got {self.sim_params!r}')
 
-    def env_config(self) -> EnvConfig:
-        return EnvConfig(namespace=self.namespace, sim=self.sim, sim_timeout=self.sim_timeout,
-                         split=self.split, max_episode_steps=self.max_episode_steps,
-                         forward_speed=self.forward_speed, turn_rate=self.turn_rate,
-                         turn_speed=self.turn_speed,
-                         sim_params=dict(self.sim_params))
+    def env_config(self, **overrides: Any) -> EnvConfig:
+        """Return the run's whole EnvConfig (actions, episode limit, reward weights, sim)."""
+        values = {name: getattr(self, name) for name in _ENV_FIELDS}
+        values['sim_params'] = dict(self.sim_params)
+        return EnvConfig(**{**values, **overrides})
 
     def dqn_kwargs(self) -> dict[str, Any]:
+        """Return the keyword arguments of ``DQN(...)`` this config sets."""
         keys = ('learning_rate', 'buffer_size', 'learning_starts', 'batch_size', 'gamma',
                 'train_freq', 'gradient_steps', 'target_update_interval',
                 'exploration_fraction', 'exploration_initial_eps', 'exploration_final_eps',
@@ -86,7 +103,7 @@ class TrainConfig:
         return {k: getattr(self, k) for k in keys}
 
     def with_full_sim_params(self) -> TrainConfig:
-        """This config with every simulation parameter spelled out in ``sim_params``.
+        """Return this config with every simulation parameter spelled out in ``sim_params``.
 
         A run saves this, so what it was trained on does not change when a default changes
         later (evaluation, diagnosis and resume all read the run's config).  Node parameters
@@ -100,6 +117,7 @@ class TrainConfig:
         return dataclasses.replace(self, sim_params={**params, **dataclasses.asdict(sim)})
 
     def to_yaml(self) -> str:
+        """Return the config as YAML (what a run saves as config.yaml)."""
         return yaml.safe_dump(dataclasses.asdict(self), sort_keys=False)
 
 
@@ -107,42 +125,47 @@ FIELDS = {f.name: f for f in dataclasses.fields(TrainConfig)}
 
 
 def coerce(values: dict[str, Any], source: str) -> dict[str, Any]:
-    """Check names and convert types of overrides (YAML or command line)."""
+    """Check names and convert types of overrides (YAML or command line).
+
+    Every value goes through :func:`nav_sim.config.convert`, the one conversion of a setting:
+    ``'4.0'`` for an int is 4, ``3.7`` is an error, a bool takes only true/false (a YAML file's
+    ``yes`` is already a bool when YAML reads it; on the command line it is an error).
+    """
     unknown = sorted(set(values) - set(FIELDS))
     if unknown:
         raise TrainConfigError(f'{source}: unknown setting(s) {unknown}; known: {sorted(FIELDS)}')
     out = {}
     for key, value in values.items():
-        kind = type(FIELDS[key].default)
+        if key == 'sim_params':
+            out[key] = _mapping(key, value, source)
+            continue
         try:
-            if key == 'sim_params':
-                parsed = yaml.safe_load(value) if isinstance(value, str) else value
-                if not isinstance(parsed, dict):
-                    raise ValueError(value)
-                out[key] = parsed
-                continue
-            if kind is bool and isinstance(value, str):
-                if value.lower() not in ('true', 'false', '1', '0', 'yes', 'no'):
-                    raise ValueError(value)
-                out[key] = value.lower() in ('true', '1', 'yes')
-            elif kind is int and isinstance(value, (str, float)):
-                number = float(value)
-                if not number.is_integer():
-                    raise ValueError(value)
-                out[key] = int(number)
-            else:
-                out[key] = kind(value)
-        except (TypeError, ValueError):
-            what = 'a mapping' if key == 'sim_params' else kind.__name__
-            raise TrainConfigError(f'{source}: {key} must be {what}, got {value!r}') from None
+            out[key] = convert(key, type(FIELDS[key].default), value)
+        except ConfigError as exc:
+            raise TrainConfigError(f'{source}: {exc}') from None
     return out
 
 
-def load_yaml(path: str | Path) -> dict[str, Any]:
+def _mapping(key: str, value: Any, source: str) -> dict[str, Any]:
     try:
-        data = yaml.safe_load(Path(path).read_text()) or {}
+        parsed = yaml.safe_load(value) if isinstance(value, str) else value
+    except yaml.YAMLError:
+        parsed = None
+    if not isinstance(parsed, dict):
+        raise TrainConfigError(f'{source}: {key} takes a mapping, got {value!r}')
+    return parsed
+
+
+def load_yaml(path: str | Path) -> dict[str, Any]:
+    """Read a YAML file of settings (checked and converted), or raise TrainConfigError."""
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding='utf-8')) or {}
+    except UnicodeDecodeError:
+        raise TrainConfigError(f'cannot read training config {path}: not a UTF-8 text file; '
+                               'it must be YAML (see config/train.yaml)') from None
     except (OSError, yaml.YAMLError) as exc:
-        raise TrainConfigError(f'cannot read training config {path}: {exc}') from exc
+        raise TrainConfigError(f'cannot read training config {path}: '
+                               f'{" ".join(str(exc).split())}') from None
     if not isinstance(data, dict):
         raise TrainConfigError(f'{path}: expected a mapping of settings')
     return coerce(data, str(path))
@@ -158,6 +181,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 def build(config_file: str | None, overrides: dict[str, Any],
           base: dict[str, Any] | None = None) -> TrainConfig:
+    """Return the config of defaults < ``base`` < the config file < command-line overrides."""
     values = dict(base or {})
     if config_file:
         values.update(load_yaml(config_file))

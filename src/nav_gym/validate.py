@@ -18,6 +18,7 @@ from nav_gym.env import NavigationEnv
 
 
 def format_checklist(checks: list[Check]) -> str:
+    """Return the checklist as PASS/FAIL lines and a count."""
     width = max(len(c.name) for c in checks)
     lines = [f"{'PASS' if c.passed else 'FAIL'}  {c.name:<{width}}  {c.measured}"
              f"{'' if c.passed else f'  (expected: {c.expected})'}" for c in checks]
@@ -27,6 +28,7 @@ def format_checklist(checks: list[Check]) -> str:
 
 
 def validate(args: argparse.Namespace) -> int:
+    """Run the checklist on the env the options describe; return the exit code."""
     config = env_config(args)
     env = NavigationEnv(config)
     try:
@@ -43,6 +45,7 @@ def validate(args: argparse.Namespace) -> int:
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Run the ``nav-gym-validate`` command."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_env_arguments(parser)
     parser.add_argument('--json', help='also write the checklist as JSON to this file')

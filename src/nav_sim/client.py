@@ -29,11 +29,12 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
-from nav_sim import qos, ros_msgs
-from nav_sim.errors import FrameSyncError, ScenarioError, SimUnavailableError
+from nav_sim import qos, ros_msgs, sim_graph
+from nav_sim.errors import FrameSyncError, ScenarioError, SimConflictError, SimUnavailableError
 
 POLL_S = 0.25
 RESET_RETRY_S = 1.0
+NAMES_WAIT_S = 3.0  # for the names of conflicting sims still being discovered
 
 
 @dataclass(frozen=True)
@@ -48,6 +49,7 @@ class Frame:
 
     @property
     def period(self) -> int:
+        """Control periods the sim had run when it published this frame."""
         return int(self.event['period'])
 
 
@@ -56,6 +58,10 @@ class SimClient:
 
     def __init__(self, namespace: str = '', timeout: float = 10.0,
                  node_name: str = 'visnav_client') -> None:
+        """Create the client's own context and node in ``namespace``.
+
+        Every wait is bounded by ``timeout`` seconds.
+        """
         self.namespace = namespace.rstrip('/')
         self.timeout = timeout
         self.context = rclpy.Context()
@@ -106,6 +112,7 @@ class SimClient:
 
     @property
     def where(self) -> str:
+        """Say where the sim is looked for, for messages."""
         return f"namespace '{self.namespace or '/'}'"
 
     def _matched(self) -> bool:
@@ -114,7 +121,43 @@ class SimClient:
                 and all(sub.get_publisher_count() > 0 for sub in self._subs))
 
     def sim_present(self) -> bool:
+        """Tell whether some node publishes the camera topic of this namespace."""
         return self.node.count_publishers(self.node.resolve_topic_name('camera/image_raw')) > 0
+
+    def sim_nodes(self) -> list[str]:
+        """Name the nodes that publish this namespace's camera or serve its ``reset``."""
+        return sim_graph.sim_nodes(self.node)
+
+    def find_sims(self, timeout: float) -> list[str]:
+        """Wait up to ``timeout`` s for a sim to show in the namespace; name what is there."""
+        deadline = time.monotonic() + timeout
+        names = self.sim_nodes()
+        while not names and time.monotonic() < deadline:
+            self._executor.spin_once(timeout_sec=min(0.05, max(deadline - time.monotonic(), 0)))
+            names = self.sim_nodes()
+        return names
+
+    def check_single_sim(self, by_name: bool = False) -> None:
+        """Raise SimConflictError if more than one node publishes the camera or serves reset.
+
+        Two sims in one namespace would both step on every ``cmd_vel`` and both answer; the
+        observations and rewards would mix their worlds.  Counting publishers and servers is
+        cheap (each reset does it); ``by_name`` also catches a camera publisher and a reset
+        server that are different nodes (when attaching).
+        """
+        if sim_graph.sim_count(self.node) <= 1 and not by_name:
+            return
+        names = self.sim_nodes()
+        if max(sim_graph.sim_count(self.node), len(names)) <= 1:
+            return
+        deadline = time.monotonic() + NAMES_WAIT_S  # a node's name comes after its endpoints
+        while (any(sim_graph.UNKNOWN_NODE in name for name in names)
+               and time.monotonic() < deadline):
+            self._executor.spin_once(timeout_sec=0.05)
+            names = self.sim_nodes()
+        if max(sim_graph.sim_count(self.node), len(names)) <= 1:
+            return  # an unnamed endpoint was the one sim's own
+        raise SimConflictError(sim_graph.conflict_message(self.node, names))
 
     def spin_until(self, done: Callable[[], bool], limit: float) -> bool:
         """Process callbacks until ``done()`` or ``limit`` seconds pass; False on time-out."""
@@ -149,8 +192,11 @@ class SimClient:
 
     def _wait_frame(self, predicate: Callable[[Frame], bool], what: str,
                     limit: float | None = None) -> Frame | None:
-        """The first frame satisfying ``predicate``; raises after ``self.timeout`` s, or returns
-        None after ``limit`` s if one is given (the caller may then retry)."""
+        """Return the first frame satisfying ``predicate``.
+
+        Raises after ``self.timeout`` s, or returns None after ``limit`` s if one is given (the
+        caller may then retry).
+        """
         def arrived() -> bool:
             return self._latest is not None and predicate(self._latest)
 
@@ -187,15 +233,21 @@ class SimClient:
 
     # --- public API -----------------------------------------------------------------------
     def wait_for_sim(self, timeout: float | None = None,
-                     abort: Callable[[], str | None] | None = None) -> None:
+                     abort: Callable[[], str | None] | None = None,
+                     started: Callable[[], bool] | None = None) -> None:
         """Block until the sim's camera topic and reset service exist, or raise with advice.
 
         ``abort`` is polled while waiting; a message from it ends the wait at once (e.g. the
-        sim process this client started has died)."""
+        sim process this client started has died).  ``started`` (the sim process this client
+        started says it is up) must hold too: another sim answering is not this one.  More than
+        one sim in the namespace raises SimConflictError (discovery may show a second one only
+        later: each reset checks again).
+        """
         limit = timeout or self.timeout
         deadline = time.monotonic() + limit
         while not (self.sim_present() and self.cli_reset.service_is_ready()
-                   and self._matched()):
+                   and self._matched() and (started is None or started())):
+            self.check_single_sim()
             reason = abort() if abort is not None else None
             if reason:
                 raise SimUnavailableError(f'nav_sim in {self.where} did not start: {reason}')
@@ -204,6 +256,7 @@ class SimClient:
                     f'no nav_sim node found in {self.where} after {limit} s; start one with '
                     '`ros2 run nav_sim sim_node` (add `--ros-args -r __ns:=/NS` for a namespace)')
             self._executor.spin_once(timeout_sec=0.05)
+        self.check_single_sim(by_name=True)
 
     def set_parameters(self, **values: Any) -> None:
         """Set sim_node parameters (e.g. seed, split); raises ScenarioError if refused."""
@@ -215,7 +268,11 @@ class SimClient:
                 raise ScenarioError(f'sim_node refused {key}={value!r}: {result.reason}')
 
     def reset(self, seed: int | None = None, split: str | None = None) -> tuple[Frame, dict]:
-        """Start an episode; returns its first frame and the scenario the sim loaded."""
+        """Start an episode; returns its first frame and the scenario the sim loaded.
+
+        Refuses (SimConflictError) if a second sim has appeared in the namespace.
+        """
+        self.check_single_sim()
         values = {k: v for k, v in (('seed', seed), ('split', split)) if v is not None}
         if values:
             self.set_parameters(**values)
@@ -225,6 +282,8 @@ class SimClient:
         while True:
             response = self._call(self.cli_reset, Trigger.Request(), 'reset')
             if not response.success:
+                if response.message.startswith(sim_graph.CONFLICT):  # the sim sees another
+                    raise SimConflictError(response.message)
                 raise ScenarioError(response.message)
             scenario = json.loads(response.message)
             stamp = int(scenario['stamp_ns'])
@@ -251,6 +310,7 @@ class SimClient:
         self.pub_cmd.publish(msg)
         frame = self._wait_frame(lambda f: f.period >= expected, 'observation after cmd_vel')
         if frame.period != expected:
+            self.check_single_sim()  # two sims answering is the likelier cause: say so
             raise FrameSyncError(
                 f'expected control period {expected}, got {frame.period}: another client may '
                 f'be driving the sim in {self.where}, or frames were dropped')
@@ -269,9 +329,11 @@ class SimClient:
             self.context.try_shutdown()
 
     def __enter__(self) -> SimClient:
+        """Use as a context manager that closes the client."""
         return self
 
     def __exit__(self, *exc: object) -> None:
+        """Close the client."""
         self.close()
 
 
@@ -287,6 +349,9 @@ def _parameter_msg(name: str, value: Any) -> ParameterMsg:
     if isinstance(value, bool):
         pv.type, pv.bool_value = ParameterType.PARAMETER_BOOL, value
     elif isinstance(value, (int, np.integer)):
+        if not -2**63 <= int(value) < 2**63:
+            raise ScenarioError(f'{name} must be in [-2**63, 2**63) (a ROS integer parameter), '
+                                f'got {value}')
         pv.type, pv.integer_value = ParameterType.PARAMETER_INTEGER, int(value)
     elif isinstance(value, float):
         if not math.isfinite(value):

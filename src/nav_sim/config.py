@@ -23,7 +23,7 @@ _TYPE_WORDS = {bool: 'true or false', int: 'an integer', float: 'a number', str:
 
 
 def convert(name: str, kind: type, value: Any) -> Any:
-    """Return ``value`` as the declared type ``kind`` of the setting ``name``, or raise ConfigError.
+    """Return ``value`` as the declared type ``kind`` of setting ``name``, or raise ConfigError.
 
     The one conversion of every setting, whether it comes from a ROS parameter, a YAML file or
     the command line (where every value is a string).  It never loses information:
@@ -63,7 +63,10 @@ def convert(name: str, kind: type, value: Any) -> Any:
     else:
         raise error
     if kind is float:
-        return float(number)
+        try:
+            return float(number)
+        except OverflowError:  # an int beyond the float range
+            raise error from None
     if isinstance(number, numbers.Integral):
         return int(number)
     if math.isfinite(number) and float(number).is_integer():
@@ -93,7 +96,7 @@ class SimConfig:
     camera_near_clip: float = _f(0.005, 'camera near clipping distance in metres (surfaces '
                                  'closer than this are not drawn)')
     camera_mount_forward: float = _f(0.0, 'camera position ahead of the robot centre in metres '
-                                     '(0: on a mast over the centre; the e-puck\'s own camera '
+                                     "(0: on a mast over the centre; the e-puck's own camera "
                                      'is at the front edge, 0.038)')
     camera_mount_height: float = _f(0.10, 'camera height above the floor in metres (e-puck: '
                                     '0.0455)')
@@ -123,6 +126,7 @@ class SimConfig:
                                             / self.camera_width))
 
     def __post_init__(self) -> None:
+        """Refuse values the simulation cannot run with (ConfigError)."""
         positive = ('sim_dt', 'wheel_radius', 'axle_length', 'max_wheel_speed', 'goal_radius',
                     'camera_near_clip', 'camera_mount_height',
                     'goal_marker_radius', 'goal_marker_height', 'min_start_goal_distance')
@@ -156,19 +160,16 @@ class SimConfig:
         unknown = sorted(set(values) - set(known))
         if unknown:
             raise ConfigError(f'unknown simulation parameter(s) {unknown}; known: {sorted(known)}')
-        converted = {}
-        for key, value in values.items():
-            kind = type(known[key].default)
-            try:
-                converted[key] = kind(value)
-            except (TypeError, ValueError) as exc:
-                raise ConfigError(f'{key}: cannot convert {value!r} to {kind.__name__}') from exc
-        return cls(**converted)
+        return cls(**{key: convert(key, type(known[key].default), value)
+                      for key, value in values.items()})
 
     @classmethod
     def from_params(cls, params: dict[str, Any]) -> SimConfig:
-        """The simulation part of a sim_node parameter mapping (node parameters such as
-        ``publish_clock`` are left out); bad simulation values raise ConfigError."""
+        """Build from the simulation part of a sim_node parameter mapping.
+
+        Node parameters such as ``publish_clock`` are left out; bad simulation values raise
+        ConfigError.
+        """
         names = {f.name for f in dataclasses.fields(cls)}
         return cls.from_dict({k: v for k, v in params.items() if k in names})
 
@@ -190,6 +191,8 @@ def validate_seed(seed: Any) -> int:
     return int(seed)
 
 
+#: the port of a live view switched on without one (``--live``): Foxglove's usual port
+LIVE_DEFAULT_PORT = 8765
 MODES = ('lockstep', 'realtime')
 
 
@@ -209,13 +212,54 @@ class NodeConfig:
     odom_frame: str = _f('odom', 'frame of the odometry and goal pose')
     base_frame: str = _f('base_link', 'frame of the robot body')
     camera_frame: str = _f('camera_optical_frame', 'optical frame of the camera images')
+    live_port: int = _f(0, 'serve a Foxglove live view (camera, 3D scene, events, /diagnostics) '
+                        'on ws://localhost:PORT; 0 = off')
 
     def __post_init__(self) -> None:
+        """Refuse values the node cannot run with (ConfigError)."""
         if self.mode not in MODES:
             raise ConfigError(f'mode must be one of {list(MODES)}, got {self.mode!r}')
         if not (math.isfinite(self.realtime_rate) and self.realtime_rate > 0):
             raise ConfigError(f'realtime_rate must be > 0, got {self.realtime_rate!r}')
         if not (math.isfinite(self.cmd_vel_timeout) and self.cmd_vel_timeout > 0):
             raise ConfigError(f'cmd_vel_timeout must be > 0, got {self.cmd_vel_timeout!r}')
+        if isinstance(self.live_port, bool) or not 0 <= self.live_port <= 65535:
+            raise ConfigError(f'live_port must be 0 (off) or a TCP port up to 65535, got '
+                              f'{self.live_port!r}')
         # seed and split are checked when they are set and again by each reset, which reports
         # a bad value as success=false instead of refusing to start the node.
+
+
+#: every sim_node parameter and its declared type (the type of its default)
+PARAMETER_TYPES: dict[str, type] = {f.name: type(f.default) for c in (SimConfig, NodeConfig)
+                                    for f in dataclasses.fields(c)}
+
+_MAX_TIMER_NS = 2**63 - 1  # a ROS timer period is a signed 64-bit count of nanoseconds
+
+
+def realtime_period_ns(ctrl_dt: float, realtime_rate: float) -> int:
+    """Return the realtime timer period ``ctrl_dt / realtime_rate`` in ns, or raise ConfigError.
+
+    The period must be a whole number of nanoseconds a ROS timer can hold: from 1 ns to
+    2**63 - 1 ns (292 years); the message gives the ``realtime_rate`` range that allows.
+    """
+    slowest, fastest = ctrl_dt * 1e9 / _MAX_TIMER_NS, ctrl_dt * 1e9
+    ok = isinstance(realtime_rate, (int, float)) and not isinstance(realtime_rate, bool) \
+        and math.isfinite(realtime_rate) and realtime_rate > 0
+    period_ns = ctrl_dt / realtime_rate * 1e9 if ok else math.nan
+    if not 1.0 <= period_ns <= _MAX_TIMER_NS:  # False for NaN and inf
+        raise ConfigError(
+            f'realtime_rate must be in [{_inward(slowest, up=True)}, '
+            f'{_inward(fastest, up=False)}] with ctrl_dt '
+            f'{ctrl_dt:g} s (the timer period ctrl_dt / realtime_rate must be 1 ns to 292 '
+            f'years), got {realtime_rate!r}')
+    return int(period_ns)
+
+
+def _inward(bound: float, up: bool) -> str:
+    """Write a range bound with 3 significant digits, rounded into the range."""
+    text = f'{bound:.3g}'
+    if (float(text) < bound) if up else (float(text) > bound):
+        unit = 10.0 ** (math.floor(math.log10(bound)) - 2)
+        text = f'{float(text) + (unit if up else -unit):.3g}'
+    return text

@@ -1,8 +1,10 @@
 """Start the sim node as ``ros2 run nav_sim sim_node`` would and drive one scripted episode.
 
-    nav-sim-demo [--seed 101] [--split train] [--namespace /visnav_demo]
+    nav-sim-demo [--seed 101] [--split train] [--namespace /visnav_demo] [--live [PORT]]
 
 Prints the scenario, then each control period: command, wheel speeds, pose, distance and event.
+With ``--live`` the sim node serves its Foxglove live view (``live_port``) and the episode runs
+at wall-clock pace (one control period per ``ctrl_dt``), so it can be watched.
 """
 
 from __future__ import annotations
@@ -10,9 +12,12 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import time
 
 from nav_sim.client import SimClient
+from nav_sim.config import SimConfig
 from nav_sim.errors import NavSimError
+from nav_sim.live import DEFAULT_PORT
 from nav_sim.sim_process import SimProcess
 
 FORWARD, LEFT, RIGHT = (0.12, 0.0), (0.0, 1.5), (0.0, -1.5)
@@ -20,12 +25,17 @@ SCRIPT = [('forward', FORWARD)] * 6 + [('left', LEFT)] * 4 + [('forward', FORWAR
     [('right', RIGHT)] * 4 + [('forward', FORWARD)] * 60
 
 
-def run(seed: int, split: str, namespace: str) -> int:
+def run(seed: int, split: str, namespace: str, live_port: int = 0) -> int:
     """Drive the scripted episode; returns a process exit code."""
     print(f'starting sim_node in namespace {namespace} ...', flush=True)
-    with SimProcess(namespace=namespace, params={'publish_clock': False}) as sim, \
+    params = {'publish_clock': False, 'live_port': live_port}
+    pace = SimConfig().ctrl_dt if live_port else 0.0
+    if live_port:
+        print(f'live view: open ws://localhost:{live_port} in Foxglove (layout: '
+              'config/foxglove/visnav.json); the episode runs at wall-clock pace', flush=True)
+    with SimProcess(namespace=namespace, params=params) as sim, \
             SimClient(namespace, timeout=20.0, node_name='visnav_demo') as client:
-        client.wait_for_sim()
+        client.wait_for_sim(abort=sim.failure, started=sim.ready)
         frame, scenario = client.reset(seed=seed, split=split)
         print(f"scenario: seed={scenario['seed']} split={scenario['split']} "
               f"layout={scenario['layout']} start={scenario['start']} goal={scenario['goal']} "
@@ -34,6 +44,7 @@ def run(seed: int, split: str, namespace: str) -> int:
         print(f"{'step':>4} {'command':>8} {'wheel L':>8} {'wheel R':>8} {'x':>7} {'y':>7} "
               f"{'yaw':>7} {'dist':>6} event")
         for name, (linear, angular) in SCRIPT:
+            time.sleep(pace)
             frame = client.step(linear, angular, frame)
             e = frame.event
             print(f"{e['episode_step']:>4} {name:>8} {e['wheel_left']:>8.2f} "
@@ -49,13 +60,17 @@ def run(seed: int, split: str, namespace: str) -> int:
 
 
 def main(argv: list[str] | None = None) -> None:
+    """Run the ``nav-sim-demo`` command."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--seed', type=int, default=101)
     parser.add_argument('--split', default='train')
     parser.add_argument('--namespace', default=f'/visnav_demo_{os.getpid()}')
+    parser.add_argument('--live', nargs='?', type=int, const=DEFAULT_PORT, default=0,
+                        metavar='PORT', help="serve the sim node's Foxglove live view on "
+                        f'ws://localhost:PORT (default {DEFAULT_PORT}) and run at wall-clock pace')
     args = parser.parse_args(argv)
     try:
-        sys.exit(run(args.seed, args.split, args.namespace))
+        sys.exit(run(args.seed, args.split, args.namespace, args.live))
     except NavSimError as exc:
         print(f'nav-sim-demo: {exc}', file=sys.stderr)
         sys.exit(1)

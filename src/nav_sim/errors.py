@@ -29,3 +29,10 @@ class SimUnavailableError(NavSimError, TimeoutError):
 
 class FrameSyncError(NavSimError, RuntimeError):
     """An observation arrived out of order (stale or dropped control periods)."""
+
+
+class SimConflictError(NavSimError, RuntimeError):
+    """More than one sim answers in a namespace, or a new sim would be a second one there.
+
+    Two sims in one namespace mix their worlds: observations and rewards come from both.
+    """

@@ -23,7 +23,10 @@ def ament_prefixes() -> list[Path]:
 
 
 def package_prefix(package: str) -> Path | None:
-    """The first prefix whose ament index registers ``package`` (as get_package_prefix does)."""
+    """Return the first prefix whose ament index registers ``package``, or None.
+
+    This is the lookup ``get_package_prefix`` does.
+    """
     for prefix in ament_prefixes():
         if (prefix / 'share' / 'ament_index' / 'resource_index' / 'packages' / package).is_file():
             return prefix

@@ -26,23 +26,27 @@ EVENT_RESET = 'reset'
 
 
 def stamp_from_ns(ns: int) -> Time:
+    """Convert integer nanoseconds to a ``builtin_interfaces/Time`` stamp."""
     return Time(sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000)
 
 
 def stamp_to_ns(stamp: Time) -> int:
+    """Convert a ``builtin_interfaces/Time`` stamp to integer nanoseconds."""
     return stamp.sec * 1_000_000_000 + stamp.nanosec
 
 
 def yaw_quaternion(yaw: float) -> Quaternion:
+    """Return the quaternion of a rotation by ``yaw`` radians about the z axis."""
     return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
 
 
 def quaternion_yaw(q: Quaternion) -> float:
+    """Return the yaw (rotation about z, radians) of a quaternion."""
     return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
 def image_msg(rgb: np.ndarray, stamp: Time, frame_id: str) -> Image:
-    """An ``rgb8`` Image from an (H, W, 3) uint8 array."""
+    """Build an ``rgb8`` Image from an (H, W, 3) uint8 array."""
     height, width, _ = rgb.shape
     msg = Image(height=height, width=width, encoding='rgb8', is_bigendian=0, step=width * 3)
     msg.header.stamp = stamp
@@ -81,6 +85,7 @@ def odometry_msg(pose: tuple[float, float, float], twist: tuple[float, float], s
 
 
 def goal_msg(goal: tuple[float, float], stamp: Time, frame_id: str) -> PoseStamped:
+    """Build a PoseStamped at the goal's (x, y) with identity orientation."""
     msg = PoseStamped()
     msg.header.stamp = stamp
     msg.header.frame_id = frame_id
@@ -90,11 +95,12 @@ def goal_msg(goal: tuple[float, float], stamp: Time, frame_id: str) -> PoseStamp
 
 
 def clock_msg(stamp: Time) -> Clock:
+    """Build a ``/clock`` message for the given sim time stamp."""
     return Clock(clock=stamp)
 
 
 def event_msg(event: str, values: dict[str, Any], stamp: Time) -> DiagnosticArray:
-    """The episode event of a control period with its counters as key/values."""
+    """Build the episode event message of a control period with its counters as key/values."""
     level = DiagnosticStatus.WARN if event == 'collision' else DiagnosticStatus.OK
     status = DiagnosticStatus(level=level, name=EVENT_STATUS_NAME, message=event,
                               hardware_id='nav_sim')
@@ -105,7 +111,7 @@ def event_msg(event: str, values: dict[str, Any], stamp: Time) -> DiagnosticArra
 
 
 def parse_event(msg: DiagnosticArray) -> dict[str, Any] | None:
-    """The event dict of an episode event message, or None if it carries none.
+    """Return the event dict of an episode event message, or None if it carries none.
 
     Returns ``event`` plus the key/values with numbers and booleans converted back.
     """
@@ -127,3 +133,15 @@ def _parse_value(text: str) -> Any:
         except ValueError:
             pass
     return text
+
+
+def diagnostics_msg(name: str, message: str, values: dict[str, Any], stamp: Time,
+                    hardware_id: str = 'visnav') -> DiagnosticArray:
+    """Build a ``/diagnostics`` DiagnosticArray with one OK status (numbers as text, 4 digits)."""
+    status = DiagnosticStatus(level=DiagnosticStatus.OK, name=name, message=message,
+                              hardware_id=hardware_id)
+    status.values = [KeyValue(key=k, value=f'{v:.4g}' if isinstance(v, float) else str(v))
+                     for k, v in values.items()]
+    msg = DiagnosticArray(status=[status])
+    msg.header.stamp = stamp
+    return msg

@@ -37,6 +37,7 @@ class ObstacleShape:
 
     @property
     def bounding_radius(self) -> float:
+        """Return the radius of the circle around the slot centre that covers the footprint."""
         return self.half_x if self.kind == 'cylinder' else math.hypot(self.half_x, self.half_y)
 
 
@@ -80,7 +81,10 @@ class Scenario:
     initial_distance: float
 
     def to_dict(self) -> dict[str, Any]:
-        """A JSON-ready description (rounded for humans, exact values stay in the object)."""
+        """Return a JSON-ready description.
+
+        Numbers are rounded for humans; the exact values stay in the object.
+        """
         return {
             'seed': self.seed, 'split': self.split, 'layout': self.layout.index,
             'start': [round(v, 4) for v in self.start],

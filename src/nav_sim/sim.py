@@ -37,19 +37,37 @@ class WheelCommand:
 def twist_to_wheels(linear: float, angular: float, config: SimConfig) -> WheelCommand:
     """Differential-drive inverse kinematics, saturating at the wheel limit.
 
-    Both wheels are scaled by the same factor so the commanded curvature is kept.  Non-finite
+    Both wheels are scaled by the same factor so the commanded curvature is kept.  Any finite
+    command gives finite wheel speeds within the limit: a command so large that the wheel speeds
+    overflow a float (``linear`` near 1e308) is scaled down before it is converted.  Non-finite
     inputs raise ValueError (callers decide whether to reject or stop).
     """
     if not (math.isfinite(linear) and math.isfinite(angular)):
         raise ValueError(f'non-finite velocity command (linear={linear}, angular={angular})')
+    left, right = _wheel_speeds(linear, angular, config)
+    if not (math.isfinite(left) and math.isfinite(right)):
+        # overflow: the same direction from a command scaled into range (it saturates anyway)
+        size = max(abs(linear), abs(angular))
+        left, right = _wheel_speeds(linear / size, angular / size, config)
+        return _saturate(left, right, config.max_wheel_speed, force=True)
+    return _saturate(left, right, config.max_wheel_speed, force=False)
+
+
+def _wheel_speeds(linear: float, angular: float, config: SimConfig) -> tuple[float, float]:
     half_axle = config.axle_length / 2.0
-    left = (linear - angular * half_axle) / config.wheel_radius
-    right = (linear + angular * half_axle) / config.wheel_radius
+    return ((linear - angular * half_axle) / config.wheel_radius,
+            (linear + angular * half_axle) / config.wheel_radius)
+
+
+def _saturate(left: float, right: float, limit: float, force: bool) -> WheelCommand:
+    """Scale both wheels so the faster one runs at ``limit`` if it exceeds it (or ``force``)."""
     peak = max(abs(left), abs(right))
-    if peak > config.max_wheel_speed:
-        scale = config.max_wheel_speed / peak
-        return WheelCommand(left * scale, right * scale, True)
-    return WheelCommand(left, right, False)
+    if peak <= limit and not force:
+        return WheelCommand(left, right, False)
+    scale = limit / peak
+    # rounding can put the product one ulp above the limit
+    return WheelCommand(min(max(left * scale, -limit), limit),
+                        min(max(right * scale, -limit), limit), True)
 
 
 def wheels_to_twist(left: float, right: float, config: SimConfig) -> tuple[float, float]:
@@ -76,6 +94,7 @@ class NavSim:
     """Scenario reset, wheel control with action repeat, goal/collision checks and rendering."""
 
     def __init__(self, config: SimConfig | None = None) -> None:
+        """Load the world of ``config`` and build its scenario banks."""
         self.config = config or SimConfig()
         self.world = World(self.config)
         self.banks = build_banks(self.config, self.world.geometry)
@@ -92,18 +111,22 @@ class NavSim:
     # --- state ----------------------------------------------------------------------------
     @property
     def sim_time_ns(self) -> int:
+        """Simulated time since start in ns (whole physics steps)."""
         return self.total_physics_steps * round(self.config.sim_dt * 1e9)
 
     @property
     def pose(self) -> tuple[float, float, float]:
+        """Robot pose (x, y, yaw) in the world."""
         return self.world.robot_pose()
 
     @property
     def goal(self) -> tuple[float, float]:
+        """Goal position (x, y) in the world."""
         return self.world.goal_position()
 
     @property
     def distance(self) -> float:
+        """Straight-line distance from the robot centre to the goal in metres."""
         x, y, _ = self.pose
         gx, gy = self.goal
         return math.hypot(gx - x, gy - y)
@@ -205,8 +228,9 @@ class NavSim:
 
     # --- sensing --------------------------------------------------------------------------
     def render(self) -> np.ndarray:
-        """The camera image (height, width, 3) uint8 RGB of the current state."""
+        """Render the camera image (height, width, 3) uint8 RGB of the current state."""
         return self.world.render_camera()
 
     def close(self) -> None:
+        """Free the renderer and the model."""
         self.world.close()

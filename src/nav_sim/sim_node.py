@@ -3,11 +3,15 @@
 Publishes (relative names): ``camera/image_raw``, ``camera/camera_info``, ``odom``,
 ``goal_pose`` (transient local), ``episode_event`` and ``/clock``.  Subscribes ``cmd_vel``.
 Services ``reset`` and ``stop`` (std_srvs/srv/Trigger).  See README.md for the lockstep protocol.
+About once a second while driven it publishes ``/diagnostics``: where a control period's time
+goes (``PERIOD_PHASES``).  With ``live_port`` it serves a Foxglove live view
+(:mod:`nav_sim.live`): camera, 3D scene, episode events and its diagnostics.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import json
 import math
 import time
@@ -19,62 +23,110 @@ from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
-from nav_sim import qos, ros_msgs
-from nav_sim.config import NodeConfig, SimConfig, normalise_split, validate_seed
+from nav_sim import qos, ros_msgs, sim_graph
+from nav_sim.config import (
+    PARAMETER_TYPES,
+    NodeConfig,
+    SimConfig,
+    convert,
+    normalise_split,
+    realtime_period_ns,
+    validate_seed,
+)
 from nav_sim.errors import ConfigError, NavSimError
+from nav_sim.lockstep import spin_lockstep
 from nav_sim.sim import EVENT_NONE, NavSim, WheelCommand, twist_to_wheels
+from nav_sim.sim_process import READY_MESSAGE
+from nav_sim.step_timing import StepTiming
 
 DYNAMIC = ('seed', 'split', 'realtime_rate', 'cmd_vel_timeout')
 WARN_PERIOD_S = 2.0
-IDLE_WAIT_NS = 2_000_000   # lockstep: look at timers and the rest after 2 ms without a command
-SERVICE_EVERY = 16         # ... and at least every 16 commands
+#: where a control period's wall time goes (reported on /diagnostics): waiting for the client's
+#: command, physics, camera rendering, building and publishing the messages, the live view
+PERIOD_PHASES = ('wait', 'physics', 'render', 'build', 'publish', 'live')
 
 
 class SimNode(Node):
     """Runs the simulation in lockstep with ``cmd_vel`` or in real time."""
 
     def __init__(self, **kwargs: Any) -> None:
+        """Declare the parameters, load the world and create the topics and services."""
         super().__init__('sim_node', **kwargs)
         sim_values = self._declare(SimConfig, read_only=True)
         node_values = self._declare(NodeConfig, read_only=False)
+        self._warn_unknown_overrides()
         self.settings = NodeConfig(**node_values)
-        self.sim = NavSim(SimConfig(**sim_values))
+        sim_config = SimConfig(**sim_values)
+        realtime_period_ns(sim_config.ctrl_dt, self.settings.realtime_rate)  # a timer can run it
+        self.sim = NavSim(sim_config)
+        self.add_pre_set_parameters_callback(self._convert_parameters)
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._create_interfaces()
         self._latest_cmd = WheelCommand(0.0, 0.0)
         self._latest_cmd_time = -math.inf
         self._timer = None
+        self._timing = StepTiming(PERIOD_PHASES, unit='period')
+        self._period_seconds = dict.fromkeys(PERIOD_PHASES, 0.0)
+        self.live = self._start_live() if self.settings.live_port else None
         if self.settings.reset_on_start:
             ok, message = self.reset_episode()
             log = self.get_logger().info if ok else self.get_logger().error
             log(f'initial reset: {message}')
         if self.settings.mode == 'realtime':
-            period = self.sim.config.ctrl_dt / self.settings.realtime_rate
-            self._timer = self.create_timer(period, self._on_realtime_tick)
+            period_ns = realtime_period_ns(self.sim.config.ctrl_dt, self.settings.realtime_rate)
+            self._timer = self.create_timer(period_ns / 1e9, self._on_realtime_tick)
         self.get_logger().info(
-            f'nav_sim ready: mode={self.settings.mode}, ctrl_dt={self.sim.config.ctrl_dt:.3f} s '
+            f'{READY_MESSAGE} mode={self.settings.mode}, ctrl_dt={self.sim.config.ctrl_dt:.3f} s '
             f'({self.sim.config.action_repeat} x {self.sim.config.sim_dt} s), camera '
             f'{self.sim.config.camera_width}x{self.sim.config.camera_height} rgb8, world '
             f'{self.sim.world.path}')
 
     # --- set-up ---------------------------------------------------------------------------
     def _declare(self, config_type: type, read_only: bool) -> dict[str, Any]:
+        """Declare a parameter per field; a given value (params file, ``-p``) is converted.
+
+        A double parameter needs a value with a decimal point (``1.0``, not ``1``), as ROS 2
+        requires of a params file; a value of another type that converts without loss (``'4'``
+        for an integer) is taken; any other raises ConfigError naming the parameter and the
+        type it takes.
+        """
         values = {}
         for field in dataclasses.fields(config_type):
             fixed = read_only or (config_type is NodeConfig and field.name not in DYNAMIC)
             descriptor = ParameterDescriptor(description=field.metadata['help'],
                                              read_only=fixed)
-            values[field.name] = self.declare_parameter(field.name, field.default,
-                                                        descriptor).value
+            value = field.default
+            given = self._parameter_overrides.get(field.name)  # rclpy has no public getter
+            if given is not None:
+                kind = type(field.default)
+                if kind is float and type(given.value) is int:
+                    raise ConfigError(f'parameter {field.name} takes a double: write '
+                                      f'{given.value}.0, not {given.value}')
+                try:
+                    value = convert(field.name, type(field.default), given.value)
+                except ConfigError as exc:
+                    raise ConfigError(f'parameter {exc}') from None
+            values[field.name] = self.declare_parameter(field.name, value, descriptor,
+                                                        ignore_override=True).value
         return values
+
+    def _warn_unknown_overrides(self) -> None:
+        """Warn about each given parameter this node does not declare (a typo in a params file)."""
+        for name in sorted(self._parameter_overrides):
+            if self.has_parameter(name):
+                continue
+            close = difflib.get_close_matches(name, PARAMETER_TYPES, n=1)
+            hint = f' (did you mean {close[0]}?)' if close else ''
+            self.get_logger().warn(f'unknown parameter {name!r} ignored{hint}; the parameters '
+                                   'of nav_sim are listed in config/sim.yaml')
 
     def _create_interfaces(self) -> None:
         self.pub_image = self.create_publisher(Image, 'camera/image_raw', qos.OBSERVATION)
@@ -88,11 +140,29 @@ class SimNode(Node):
         self._camera_info = ros_msgs.camera_info_msg(
             cfg.camera_width, cfg.camera_height, cfg.camera_fovy_deg, ros_msgs.stamp_from_ns(0),
             self.settings.camera_frame)
+        # /diagnostics as diagnostic_updater publishes it: absolute, reliable, depth 10
+        self.pub_diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.sub_cmd = self.create_subscription(Twist, 'cmd_vel', self._on_cmd_vel, qos.CONTROL)
         self.create_service(Trigger, 'reset', self._on_reset)
         self.create_service(Trigger, 'stop', self._on_stop)
 
     # --- parameters -----------------------------------------------------------------------
+    def _convert_parameters(self, params: list[Parameter]) -> list[Parameter]:
+        """Give each new value the declared type where that loses nothing (``2`` -> ``2.0``).
+
+        A value that does not convert is passed on unchanged and then refused with a reason.
+        """
+        out = []
+        for param in params:
+            kind = PARAMETER_TYPES.get(param.name)
+            if kind is not None and param.type_ != Parameter.Type.NOT_SET:
+                try:
+                    param = Parameter(param.name, value=convert(param.name, kind, param.value))
+                except ConfigError:
+                    pass
+            out.append(param)
+        return out
+
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
         values = dataclasses.asdict(self.settings)
         values.update({p.name: p.value for p in params if p.name in values})
@@ -100,6 +170,7 @@ class SimNode(Node):
             NodeConfig(**values)
             validate_seed(values['seed'])
             normalise_split(values['split'])
+            realtime_period_ns(self.sim.config.ctrl_dt, values['realtime_rate'])
         except (NavSimError, TypeError) as exc:
             return SetParametersResult(successful=False, reason=str(exc))
         return SetParametersResult(successful=True)
@@ -109,8 +180,8 @@ class SimNode(Node):
         if changes:
             self.settings = dataclasses.replace(self.settings, **changes)
         if 'realtime_rate' in changes and self._timer is not None:
-            period = self.sim.config.ctrl_dt / self.settings.realtime_rate
-            self._timer.timer_period_ns = int(period * 1e9)
+            self._timer.timer_period_ns = realtime_period_ns(self.sim.config.ctrl_dt,
+                                                             self.settings.realtime_rate)
             self._timer.reset()
 
     # --- episodes -------------------------------------------------------------------------
@@ -125,7 +196,12 @@ class SimNode(Node):
         self._latest_cmd = WheelCommand(0.0, 0.0)
         stamp = ros_msgs.stamp_from_ns(self.sim.sim_time_ns)
         self.pub_goal.publish(ros_msgs.goal_msg(scenario.goal, stamp, self.settings.odom_frame))
+        if self.live is not None:
+            self._live_scene.reset(scenario.to_dict(), self.sim.pose)
         self._publish_period(ros_msgs.EVENT_RESET, physics_steps=self.sim.config.settle_steps)
+        # a reset is between control periods: the next period counts it as waiting for the
+        # client, so its publishing must not count again in that period's phases
+        self._period_seconds.update(dict.fromkeys(self._period_seconds, 0.0))
         description = scenario.to_dict()
         description.update(episode=self.sim.episode, period=self.sim.period,
                            stamp_ns=self.sim.sim_time_ns)
@@ -133,7 +209,11 @@ class SimNode(Node):
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response
                   ) -> Trigger.Response:
-        response.success, response.message = self.reset_episode()
+        if sim_graph.sim_count(self) > 1:  # another sim here: a client would mix two worlds
+            response.success = False
+            response.message = sim_graph.conflict_message(self, sim_graph.sim_nodes(self))
+        else:
+            response.success, response.message = self.reset_episode()
         if not response.success:
             self.get_logger().error(response.message)
         return response
@@ -183,10 +263,17 @@ class SimNode(Node):
         self._advance(self._latest_cmd)
 
     def _advance(self, command: WheelCommand) -> None:
+        start = time.perf_counter()
+        seconds = self._period_seconds
+        seconds['wait'] += self._timing.since_last_step(start)
         result = self.sim.step(command)
         if result.done and self.settings.mode == 'realtime':
             self._latest_cmd = WheelCommand(0.0, 0.0)
+        seconds['physics'] += time.perf_counter() - start
+        if self.live is not None:
+            self._live_scene.step(result.pose)
         self._publish_period(result.event, physics_steps=result.physics_steps)
+        self._period_done()
 
     # --- publishing -----------------------------------------------------------------------
     def _publish_period(self, event: str, physics_steps: int) -> None:
@@ -195,22 +282,87 @@ class SimNode(Node):
         The small messages go first so a client can process them while the camera renders; a
         message nobody subscribes to is not built.
         """
-        sim, settings = self.sim, self.settings
+        sim, settings, send = self.sim, self.settings, self._send
         stamp = ros_msgs.stamp_from_ns(sim.sim_time_ns)
         pose, twist = sim.pose, sim.twist
         # the event and the image are always published: a client pairs them to make a frame
-        self.pub_event.publish(ros_msgs.event_msg(event or EVENT_NONE,
-                                                  self._event_values(physics_steps, pose, twist),
-                                                  stamp))
+        event_msg = send(self.pub_event, lambda: ros_msgs.event_msg(
+            event or EVENT_NONE, self._event_values(physics_steps, pose, twist), stamp))
         if self.pub_odom.get_subscription_count():
-            self.pub_odom.publish(ros_msgs.odometry_msg(pose, twist, stamp, settings.odom_frame,
-                                                        settings.base_frame))
+            send(self.pub_odom, lambda: ros_msgs.odometry_msg(
+                pose, twist, stamp, settings.odom_frame, settings.base_frame))
         if self.pub_clock is not None and self.pub_clock.get_subscription_count():
-            self.pub_clock.publish(ros_msgs.clock_msg(stamp))
+            send(self.pub_clock, lambda: ros_msgs.clock_msg(stamp))
         if self.pub_info.get_subscription_count():
             self._camera_info.header.stamp = stamp
-            self.pub_info.publish(self._camera_info)
-        self.pub_image.publish(ros_msgs.image_msg(sim.render(), stamp, settings.camera_frame))
+            send(self.pub_info, lambda: self._camera_info)
+        start = time.perf_counter()
+        rgb = sim.render()
+        self._period_seconds['render'] += time.perf_counter() - start
+        send(self.pub_image, lambda: ros_msgs.image_msg(rgb, stamp, settings.camera_frame))
+        if self.live is not None:
+            start = time.perf_counter()
+            self._log_live(event_msg, rgb, event == ros_msgs.EVENT_RESET)
+            self._period_seconds['live'] += time.perf_counter() - start
+
+    def _send(self, publisher: Any, build: Any) -> Any:
+        """Build a message and publish it, timing both; returns the message."""
+        start = time.perf_counter()
+        msg = build()
+        built = time.perf_counter()
+        publisher.publish(msg)
+        seconds = self._period_seconds
+        seconds['build'] += built - start
+        seconds['publish'] += time.perf_counter() - built
+        return msg
+
+    # --- time budget (/diagnostics) and live view -------------------------------------------
+    def _period_done(self) -> None:
+        """Close a control period's timing; about once a second publish /diagnostics.
+
+        Phases are accumulated only within control periods (a reset between periods counts as
+        waiting for the client), so the phases add up to the period's wall time.
+        """
+        timing, seconds = self._timing, self._period_seconds
+        for phase, value in seconds.items():
+            timing.add(phase, value)
+            seconds[phase] = 0.0
+        now = timing.step_done()
+        if timing.due(now):
+            self._publish_diagnostics(timing.report(now))
+
+    def _publish_diagnostics(self, report: dict[str, float]) -> None:
+        msg = ros_msgs.diagnostics_msg(
+            f'{self.get_fully_qualified_name()}: control period',
+            f"{report['periods_per_s']:.1f} periods/s", report,
+            ros_msgs.stamp_from_ns(self.sim.sim_time_ns), hardware_id='nav_sim')
+        self.pub_diagnostics.publish(msg)
+        if self.live is not None:
+            from nav_sim import live_topics
+            self.live.log_cdr(live_topics.DIAGNOSTICS_TOPIC, lambda: serialize_message(msg),
+                              self.sim.sim_time_ns)
+
+    def _start_live(self) -> Any:
+        # imported only with the live view on (rosbags' typestore, the Foxglove SDK)
+        from nav_sim import live_topics
+        from nav_sim.live import EpisodeScene, LiveView
+        live = LiveView(self.settings.live_port, live_topics.SIM_TOPICS,
+                        name=f'visnav {self.get_fully_qualified_name()}')
+        self._live_scene = EpisodeScene(live_topics.ArenaScene.from_world(self.sim.world))
+        if self.sim.scenario is not None:
+            self._live_scene.reset(self.sim.scenario.to_dict(), self.sim.pose)
+        self.get_logger().info(f'live view: open {live.url} in Foxglove '
+                               '(layout: share/nav_sim/config/foxglove/visnav.json)')
+        return live
+
+    def _log_live(self, event_msg: DiagnosticArray, rgb: Any, new_episode: bool) -> None:
+        """Send what a viewer subscribes to: camera, event, scene and robot."""
+        from nav_sim import live_topics
+        live, stamp_ns = self.live, self.sim.sim_time_ns
+        live.log(live_topics.CAMERA_TOPIC,
+                 lambda: live_topics.image(rgb, stamp_ns, self.settings.camera_frame), stamp_ns)
+        live.log_cdr(live_topics.EVENT_TOPIC, lambda: serialize_message(event_msg), stamp_ns)
+        self._live_scene.log(live, stamp_ns, new_episode)
 
     def _event_values(self, physics_steps: int, pose: tuple[float, float, float],
                       twist: tuple[float, float]) -> dict[str, Any]:
@@ -226,39 +378,12 @@ class SimNode(Node):
         }
 
     def destroy_node(self) -> None:
+        """Stop the live view and release the renderer, then destroy the node."""
+        if self.live is not None:
+            self.live.close()
+            self.live = None
         self.sim.close()
         super().destroy_node()
-
-
-def spin_lockstep(node: SimNode, executor: SingleThreadedExecutor) -> None:
-    """Serve ``cmd_vel`` from a bare wait set (as ``rclpy.wait_for_message`` does) and let the
-    executor handle services, parameters and the rest.
-
-    The generic executor costs about a third of a millisecond per callback, as much as the
-    sim's step and render together; lockstep commands are the hot path, so they skip it.  The
-    wait set also holds the node's services, so a ``reset``/``stop`` request wakes the loop at
-    once (episode boundaries are on the training path too); anything else (timers, parameter
-    events) is looked at after ``IDLE_WAIT_NS`` without a command.
-    """
-    context = node.context
-    sub = node.sub_cmd
-    services = list(node.services)
-    wait_set = _rclpy.WaitSet(1, 0, 0, 0, len(services), 0, context.handle)
-    served = 0
-    while context.ok():
-        wait_set.clear_entities()
-        wait_set.add_subscription(sub.handle)
-        for service in services:
-            wait_set.add_service(service.handle)
-        wait_set.wait(IDLE_WAIT_NS)
-        taken = None
-        if sub.handle.pointer in wait_set.get_ready_entities('subscription'):
-            taken = sub.handle.take_message(sub.msg_type, sub.raw)
-        if taken is not None:
-            node._on_cmd_vel(taken[0])
-            served += 1
-        if taken is None or served % SERVICE_EVERY == 0:
-            executor.spin_once(timeout_sec=0.0)
 
 
 def main(args: list[str] | None = None) -> None:
@@ -272,7 +397,7 @@ def main(args: list[str] | None = None) -> None:
         node = SimNode()
         executor.add_node(node)
         if node.settings.mode == 'lockstep':
-            spin_lockstep(node, executor)
+            spin_lockstep(node, executor, node.sub_cmd)  # blocks while idle
         else:
             executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import os
 import signal
 import subprocess
@@ -11,36 +10,34 @@ import tempfile
 from collections.abc import Mapping
 from typing import Any
 
-from nav_sim.config import NodeConfig, SimConfig
+from nav_sim.config import PARAMETER_TYPES, convert
 from nav_sim.errors import ConfigError
 from nav_sim.paths import package_prefix
 
-_PARAM_TYPES = {f.name: type(f.default) for c in (SimConfig, NodeConfig)
-                for f in dataclasses.fields(c)}
+READY_MESSAGE = 'nav_sim ready:'  # how the node's last start-up log line begins
 
 
 def typed_params(params: Mapping[str, Any]) -> dict[str, Any]:
-    """Convert values to the declared type of each sim_node parameter (a YAML ``90`` for a
-    double parameter must reach the node as ``90.0``); unknown names raise ConfigError."""
-    unknown = sorted(set(params) - set(_PARAM_TYPES))
+    """Convert values to the declared type of each sim_node parameter with :func:`convert`.
+
+    A YAML ``90`` for a double parameter reaches the node as ``90.0``; ``3.7`` for an integer
+    parameter, ``'yes'`` for a bool and unknown names raise ConfigError, as does an integer
+    beyond the 64 bits a ROS parameter holds.
+    """
+    unknown = sorted(set(params) - set(PARAMETER_TYPES))
     if unknown:
         raise ConfigError(f'unknown sim_node parameter(s) {unknown}; known: '
-                          f'{sorted(_PARAM_TYPES)}')
+                          f'{sorted(PARAMETER_TYPES)}')
     out = {}
     for key, value in params.items():
-        kind = _PARAM_TYPES[key]
         try:
-            if kind is bool and isinstance(value, str):
-                if value.lower() not in ('true', 'false'):
-                    raise ValueError(value)
-                out[key] = value.lower() == 'true'
-            else:
-                out[key] = kind(value)
-        except (TypeError, ValueError) as exc:
-            raise ConfigError(f'sim_node parameter {key}: cannot convert {value!r} to '
-                              f'{kind.__name__}') from exc
-        if kind is int and isinstance(value, float) and not value.is_integer():
-            raise ConfigError(f'sim_node parameter {key} must be an integer, got {value!r}')
+            out[key] = convert(key, PARAMETER_TYPES[key], value)
+        except ConfigError as exc:
+            raise ConfigError(f'sim_node parameter {exc}') from None
+        if isinstance(out[key], int) and not isinstance(out[key], bool) \
+                and not -2**63 <= out[key] < 2**63:
+            raise ConfigError(f'sim_node parameter {key} must be in [-2**63, 2**63) (a ROS '
+                              f'integer parameter), got {value!r}')
     return out
 
 
@@ -74,8 +71,11 @@ def ros_args(namespace: str = '', params: Mapping[str, Any] | None = None,
 
 
 def _stop_with_parent() -> None:
-    """In the child, before exec: SIGTERM when the parent dies (even by SIGKILL), so a lockstep
-    sim never outlives the env that started it (Linux prctl PR_SET_PDEATHSIG)."""
+    """Ask for SIGTERM when the parent dies (in the child, before exec).
+
+    Even if the parent is killed by SIGKILL, a lockstep sim never outlives the env that started
+    it (Linux prctl PR_SET_PDEATHSIG).
+    """
     if sys.platform.startswith('linux'):
         import ctypes
         ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG = 1
@@ -87,14 +87,19 @@ class SimProcess:
     def __init__(self, namespace: str = '', params: Mapping[str, Any] | None = None,
                  params_file: str | None = None, quiet: bool = True,
                  env: Mapping[str, str] | None = None) -> None:
+        """Start sim_node in ``namespace`` with ``params`` and a ``params_file``.
+
+        ``quiet`` keeps the node's output in a temporary file (for ``failure`` and ``ready``).
+        """
         command = executable_command() + ros_args(namespace, params, params_file)
-        # quiet: keep stderr (the node's log) in a temporary file to explain a failed start
+        # quiet: keep its output (log and errors) in a temporary file to explain a failed start
         self._log = tempfile.TemporaryFile() if quiet else None
-        self.process = subprocess.Popen(command, stdout=subprocess.DEVNULL if quiet else None,
+        self.process = subprocess.Popen(command, stdout=self._log,
                                         stderr=self._log,
                                         env=dict(env) if env is not None else None,
                                         preexec_fn=_stop_with_parent)
         self.namespace = namespace
+        self._ready = False
 
     def failure(self) -> str | None:
         """None while the process runs; else its exit code and the end of its log."""
@@ -108,7 +113,21 @@ class SimProcess:
             tail = ': ' + ' | '.join(lines[-5:]) if lines else ''
         return f'sim_node exited with code {code}{tail}'
 
+    def ready(self) -> bool:
+        """Tell whether the node has logged that it finished starting.
+
+        Without ``quiet`` its log is not kept: then this only says that the process runs.
+        """
+        if self._log is None:
+            return self.alive()
+        if not self._ready and self.process.poll() is None:
+            # pread: the child shares the file offset, which must stay where it writes
+            fd = self._log.fileno()
+            self._ready = READY_MESSAGE.encode() in os.pread(fd, os.fstat(fd).st_size, 0)
+        return self._ready
+
     def alive(self) -> bool:
+        """Tell whether the process still runs."""
         return self.process.poll() is None
 
     def stop(self, timeout: float = 10.0) -> int:
@@ -126,7 +145,9 @@ class SimProcess:
         return self.process.returncode
 
     def __enter__(self) -> SimProcess:
+        """Use as a context manager that stops the process."""
         return self
 
     def __exit__(self, *exc: object) -> None:
+        """Stop the process."""
         self.stop()

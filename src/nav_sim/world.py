@@ -24,6 +24,7 @@ class World:
     """An MJCF model with its data, named ids and a fast offscreen camera renderer."""
 
     def __init__(self, config: SimConfig) -> None:
+        """Load the configured world, apply the config to the model and look up the ids."""
         self.config = config
         self.path = find_world(config.world)
         self.model = mujoco.MjModel.from_xml_path(str(self.path))
@@ -115,22 +116,29 @@ class World:
                 self.data.mocap_quat[mocap] = (1.0, 0.0, 0.0, 0.0)
 
     def set_goal(self, x: float, y: float) -> None:
+        """Move the goal marker to (x, y), resting on the floor."""
         self.data.mocap_pos[self.goal_mocap] = (x, y, self.config.goal_marker_height / 2.0)
 
     def set_robot_pose(self, x: float, y: float, yaw: float) -> None:
+        """Put the robot base at (x, y, yaw) and zero its velocity."""
         self.data.qpos[self.qpos_slice] = (x, y, yaw)
         self.data.qvel[self.qvel_slice] = 0.0
 
     def robot_pose(self) -> tuple[float, float, float]:
+        """Return the robot base pose (x, y, yaw), with yaw wrapped to [-pi, pi]."""
         x, y, yaw = (float(v) for v in self.data.qpos[self.qpos_slice])
         return x, y, math.remainder(yaw, 2.0 * math.pi)
 
     def goal_position(self) -> tuple[float, float]:
+        """Return the goal marker's (x, y) position."""
         pos = self.data.mocap_pos[self.goal_mocap]
         return float(pos[0]), float(pos[1])
 
     def robot_in_collision(self) -> bool:
-        """True if a MuJoCo contact touches the robot body (walls and obstacles only collide)."""
+        """Return True if a MuJoCo contact touches the robot body.
+
+        Only walls and obstacles collide with it.
+        """
         d = self.data
         for i in range(d.ncon):
             contact = d.contact[i]
@@ -140,6 +148,10 @@ class World:
 
     # --- rendering ------------------------------------------------------------------------
     def renderer(self) -> mujoco.Renderer:
+        """Return the offscreen camera renderer, creating it on first use.
+
+        Shadows, reflections and the skybox are switched off.
+        """
         if self._renderer is None:
             r = mujoco.Renderer(self.model, self.config.camera_height, self.config.camera_width)
             for flag in (mujoco.mjtRndFlag.mjRND_SHADOW, mujoco.mjtRndFlag.mjRND_REFLECTION,
@@ -149,19 +161,24 @@ class World:
         return self._renderer
 
     def render_camera(self) -> np.ndarray:
-        """The robot camera image, (height, width, 3) uint8 RGB."""
+        """Render the robot camera image, (height, width, 3) uint8 RGB."""
         r = self.renderer()
         r.update_scene(self.data, camera=self.camera_id)
         return r.render()
 
     def close(self) -> None:
+        """Release the renderer, if one was created."""
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
 
 
 def _consecutive(addresses: list[int], what: str) -> slice:
-    """The base joints' (x, y, yaw) addresses as one slice (a view, cheap in the hot loop)."""
+    """Return the base joints' (x, y, yaw) addresses as one slice.
+
+    A slice indexes a view, which is cheap in the hot loop; raise ValueError if the addresses
+    are not consecutive.
+    """
     first = addresses[0]
     if addresses != list(range(first, first + len(addresses))):
         raise ValueError(f'the robot base joints must be consecutive in {what}, got {addresses}')

@@ -1,5 +1,7 @@
-"""Evaluation of a tiny DQN through the real ROS graph, the bag it records, its determinism,
-and the diagnosis of one of its failed episodes."""
+"""Evaluation of a tiny DQN through the real ROS graph.
+
+The bag it records, its determinism, and the diagnosis of one of its failed episodes.
+"""
 
 from __future__ import annotations
 
@@ -35,7 +37,7 @@ class _Spaces(gym.Env):
 
 @pytest.fixture(scope='module')
 def run_dir(tmp_path_factory) -> Path:
-    """A run directory with a tiny model (two checkpoints) and a 15-step episode limit."""
+    """Make a run directory with a tiny model (two checkpoints) and a 15-step episode limit."""
     from stable_baselines3 import DQN
     path = tmp_path_factory.mktemp('run')
     config = TrainConfig(max_episode_steps=15)
@@ -140,14 +142,78 @@ def test_diagnosis_of_a_failed_episode(run_dir, evaluated):
     assert status['evaluation'] == 'ok'  # the re-run reproduced the actions
     assert any('reproduced all' in e for v in result['layers'] for e in v['evidence'])
     md = (run_dir / 'eval' / 'diagnosis.md').read_text()
-    assert 'Earliest layer' in md or 'No layer' in md
+    # the verdict names the first layer whose status is not ok, and the file says so
+    flagged = [v for v in result['layers'] if v['status'] in ('broken', 'suspect')]
+    assert flagged, 'an untrained tiny model fails for a reason the evidence shows'
+    first = flagged[0]
+    assert result['earliest_suspect_layer'] == first['layer']
+    assert f"Earliest layer that looks {first['status']}: {first['layer']}" in md
+    assert f"**Verdict:** {result['summary']}" in md
     for figure in result['figures']:
         assert (run_dir / figure).read_bytes()[:8] == b'\x89PNG\r\n\x1a\n'
 
 
-def test_evaluate_command_reports_errors_without_traceback(tmp_path):
-    result = subprocess.run([sys.executable, '-m', 'nav_eval.evaluate', str(tmp_path)],
-                            capture_output=True, text=True, timeout=120)
-    assert result.returncode == 1
-    assert 'not a training run directory' in result.stderr
-    assert 'Traceback' not in result.stderr
+def evaluate_command(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, '-m', 'nav_eval.evaluate', *args],
+                          capture_output=True, text=True, timeout=120)
+
+
+def one_line_error(result: subprocess.CompletedProcess) -> str:
+    assert result.returncode == 1 and 'Traceback' not in result.stderr, result.stderr
+    (line,) = result.stderr.strip().splitlines()
+    assert line.startswith('nav-eval-evaluate: error: ')
+    return line
+
+
+def test_evaluate_command_reports_errors_without_traceback(tmp_path, run_dir):
+    assert 'not a training run directory' in one_line_error(evaluate_command(str(tmp_path)))
+    line = one_line_error(evaluate_command(str(run_dir), '--out', '/dev/null/x', '--sets',
+                                           'random_train'))
+    assert 'cannot create the output directory /dev/null/x (Not a directory)' in line
+    line = one_line_error(evaluate_command(str(run_dir), '--heldout-seeds', '5-1,207'))
+    assert "bad seed range '5-1'" in line
+    binary = tmp_path / 'binary'
+    binary.mkdir()
+    (binary / 'config.yaml').write_bytes(bytes(range(256)) * 4)
+    assert 'not a UTF-8 text file' in one_line_error(evaluate_command(str(binary)))
+
+
+def test_a_reversed_seed_range_is_rejected():
+    with pytest.raises(EvaluationError, match="bad seed range '5-1'"):
+        evaluate.parse_seeds('5-1,207')
+    assert evaluate.parse_seeds('5-5,207') == (5, 207)
+
+
+def test_the_bags_replay_the_foxglove_layout(run_dir, evaluated):
+    """Every topic of the shipped layout but the live-only ones is in the bag.
+
+    The live-only ones are the training statistics and /diagnostics; the scene, robot and step
+    topics follow the episodes, with the live view's types.
+    """
+    from nav_eval.bags import read_bag
+    from nav_sim import live_topics
+    from nav_sim.live_layout import LIVE_ONLY_TOPICS, referenced_topics
+    layout = json.loads((Path(__file__).resolve().parents[2] / 'config' / 'foxglove'
+                         / 'visnav.json').read_text())
+    wanted = referenced_topics(layout) - set(LIVE_ONLY_TOPICS)
+    bag = run_dir / 'eval' / 'bags' / 'dqn_heldout'
+    messages = read_bag(bag)
+    assert wanted <= set(messages), f'missing in the bag: {sorted(wanted - set(messages))}'
+    entry = evaluated['sets'][1]
+    episodes, lengths = len(entry['episodes']), sum(e['length'] for e in entry['episodes'])
+    scenes = messages[live_topics.SCENE_TOPIC]
+    assert len(scenes) == episodes
+    assert len(messages[live_topics.ROBOT_TOPIC]) == lengths + episodes
+    assert len(messages[live_topics.OBSERVATION_TOPIC]) == lengths + episodes
+    steps = [m for _, m in messages[live_topics.STEP_TOPIC]]
+    assert len(steps) == lengths
+    assert all(len(m.q_values) == 3 for m in steps)  # the DQN's Q-values
+    assert all(m.action == int(np.argmax(m.q_values)) for m in steps)
+    # each frame's scene topics share the camera image's stamp
+    image_times = {t for t, _ in messages[live_topics.CAMERA_TOPIC]}
+    assert {t for t, _ in messages[live_topics.ROBOT_TOPIC]} == image_times
+    goals = [next(m for m in scene.markers if m.ns == 'goal') for _, scene in scenes]
+    traces = [json.loads((run_dir / 'eval' / 'traces' / 'dqn_heldout' / f'seed_{e["seed"]}.json')
+                         .read_text()) for e in entry['episodes']]
+    assert [(g.pose.position.x, g.pose.position.y) for g in goals] == [
+        pytest.approx(tuple(t['scenario']['goal']), abs=1e-3) for t in traces]

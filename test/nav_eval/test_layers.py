@@ -18,7 +18,7 @@ GOAL = (1.0, 0.0)
 
 
 def frame(pose, goal=GOAL, hfov=math.radians(SIM.camera_hfov_deg)):
-    """A grey observation with a green goal column where a camera at ``pose`` sees it."""
+    """Draw a grey observation with a green goal column where a camera at ``pose`` sees it."""
     rng = np.random.default_rng([int(abs(v) * 1e4) for v in pose])
     img = rng.integers(90, 140, size=(3, 84, 84)).astype(np.uint8)
     bearing = math.remainder(math.atan2(goal[1] - pose[1], goal[0] - pose[0]) - pose[2],
@@ -60,7 +60,7 @@ def episode(actions, mapping=(1, 0, -1), start=(0.0, 0.0, 0.4), goal=GOAL,
 
 
 def servo_actions(start=(0.0, 0.0, 0.4), n=30):
-    """A visual servo's actions from the constructed frames (a policy that works)."""
+    """Return a visual servo's actions from the constructed frames (a policy that works)."""
     trace, frames = episode([], start=start)
     actions, pose = [], list(start)
     for _ in range(n):
@@ -180,3 +180,34 @@ def test_the_diagnosed_failure_is_the_final_models_first_then_the_early_checkpoi
     write({'dqn_heldout': ok, 'dqn_train': ok, 'early_heldout': ok, 'early_train': ok})
     with pytest.raises(DiagnosisError, match='nothing to diagnose'):
         pick_episode(tmp_path, None, None)
+
+
+def test_diagnosis_checks_a_run_against_its_own_reward_weights(tmp_path):
+    """A run trained with other reward weights: its rewards are right by its own config."""
+    import json
+
+    from nav_eval.diagnose import run
+    from nav_gym.run_dir import frames_path, trace_path
+    from nav_gym.train_config import TrainConfig
+
+    weights = {'progress_weight': 3.0, 'step_penalty': -0.05, 'goal_reward': 10.0,
+               'collision_penalty': -2.0}
+    trace, frames = episode(servo_actions(n=6), final_event='collision')
+    for s in trace['steps']:
+        progress = s['reward_terms']['progress'] / 2.0
+        s['reward_terms'] = {'progress': 3.0 * progress, 'step': -0.05, 'goal': 0.0,
+                             'collision': -2.0 if s['event'] == 'collision' else 0.0}
+        s['reward'] = sum(s['reward_terms'].values())
+    trace['outcome'] = 'collision'
+    (tmp_path / 'config.yaml').write_text(TrainConfig(**weights).to_yaml())
+    path = trace_path(tmp_path / 'eval', 'dqn_heldout', 201)
+    path.parent.mkdir(parents=True)
+    path.write_text(json.dumps(trace))
+    np.savez_compressed(frames_path(path), obs=frames)
+    (tmp_path / 'eval' / 'results.json').write_text(json.dumps({'sets': [
+        {'name': 'dqn_heldout', 'episodes': [{'seed': 201, 'outcome': 'collision'}]}]}))
+    status = {v['layer']: v['status'] for v in run(tmp_path, replay=False)['layers']}
+    assert status['reward'] == 'ok'
+    # the same episode judged by the default weights would not follow the formula
+    assert layers.check_reward(trace['steps'], trace['scenario']['initial_distance'], {
+        k: getattr(ENV, k) for k in weights}).status == 'broken'

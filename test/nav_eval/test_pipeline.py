@@ -30,6 +30,8 @@ def test_pipeline_runs_every_stage_and_writes_the_report(tmp_path):
     for number in range(1, 6):
         assert f'[{number}/5]' in result.stdout
     run = tmp_path / 'run'
+    # a finished run keeps no replay buffer (only --resume needs one)
+    assert not (run / 'checkpoints' / 'replay_buffer.pkl').exists()
     checks = json.loads((run / 'validation.json').read_text())
     assert len(checks) == 12 and all(c['passed'] for c in checks)
     results = json.loads((run / 'eval' / 'results.json').read_text())

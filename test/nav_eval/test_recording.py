@@ -35,13 +35,13 @@ from nav_eval.bags import (
     read_bag,
 )
 from nav_eval.errors import RecordingError
-from nav_eval.record import format_counts, strip_ros_args
+from nav_eval.record import format_counts
+from nav_gym.cli import strip_ros_args
 from nav_sim import qos
 from nav_sim.client import SimClient
 from nav_sim.sim_process import SimProcess
 
 STEPS = 10
-WARM_UP_S = 1.5
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 #: no reset at start-up: nothing is published before a test drives the sim
 QUIET_START = {'publish_clock': True, 'reset_on_start': False}
@@ -50,7 +50,7 @@ _names = itertools.count()
 
 @pytest.fixture
 def namespace() -> str:
-    """A namespace no other test (or test run) uses."""
+    """Return a namespace no other test (or test run) uses."""
     return f'/rec{os.getpid()}_{next(_names)}'
 
 
@@ -83,7 +83,7 @@ def check_metadata(bag: Path, counts: dict[str, int]) -> Path:
 
 
 def check_with_mcap_library(mcap_file: Path, counts: dict[str, int]) -> None:
-    """The independent ``mcap`` reader sees the same messages (only if it is installed)."""
+    """Check that the independent ``mcap`` reader sees the same messages (if installed)."""
     if importlib.util.find_spec('mcap') is None:
         return
     from mcap.reader import make_reader
@@ -197,7 +197,7 @@ def stop_process(process: subprocess.Popen, sig: int = signal.SIGINT) -> int:
 
 
 def printed_counts(output: str) -> dict[str, int]:
-    """The per-topic counts the command printed after 'messages written to ...:'."""
+    """Return the per-topic counts the command printed after 'messages written to ...:'."""
     lines = output.split('messages written to', 1)[1].splitlines()[1:]
     pairs = [line.split() for line in lines if line.strip()]
     return {topic: int(n) for n, topic in pairs if topic != 'total'}
@@ -214,13 +214,13 @@ def test_record_command_stops_on_sigint_and_leaves_a_readable_bag(tmp_path, name
             with SimClient(namespace, timeout=15.0) as client:
                 client.wait_for_sim(30.0)
                 assert wait_until(lambda: client.pub_cmd.get_subscription_count() >= 2, 15.0)
-                # the recorder's progress is not visible from here: drive a while first, so
-                # the sim has matched its subscriptions too (see warm_up)
+                # drive until the command says every topic reaches it: then the sim has
+                # matched its subscriptions too (see warm_up)
                 frame, _ = client.reset(seed=7)
-                deadline = time.monotonic() + WARM_UP_S
-                while time.monotonic() < deadline:
+                deadline = time.monotonic() + 30.0
+                while 'receiving every nav_sim topic' not in out.read_text():
+                    assert time.monotonic() < deadline, err.read_text()
                     frame = client.step(0.0, 0.0, frame)
-                    time.sleep(0.05)
                 frame, _ = client.reset(seed=103)
                 stamps = [frame.stamp_ns]
                 for _ in range(steps):

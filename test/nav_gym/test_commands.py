@@ -31,6 +31,14 @@ def run(args: list[str], timeout: float = 300) -> subprocess.CompletedProcess:
     return subprocess.run(args, capture_output=True, text=True, timeout=timeout)
 
 
+def monitor_rows(path: Path) -> list[str]:
+    """Return the episode rows of a Monitor CSV written so far (none before it exists)."""
+    if not path.is_file():
+        return []
+    lines = path.read_text().splitlines()
+    return [line for line in lines[2:] if line.strip()]
+
+
 def leftover_sims(marker: str) -> list[str]:
     out = subprocess.run(['pgrep', '-af', marker], capture_output=True, text=True).stdout
     return [line for line in out.splitlines() if 'pgrep' not in line]
@@ -68,7 +76,7 @@ def test_scripted_episode_prints_each_transition_and_stops():
 def test_smoke_training_checkpoints_resumes_and_loads(tmp_path):
     import numpy as np
     result = run([ros2_run('nav_gym', 'train'), *SMOKE, '--runs-dir', str(tmp_path),
-                  '--run-name', 'smoke'])
+                  '--run-name', 'smoke', '--keep-replay-buffer', 'true'])
     assert result.returncode == 0, result.stdout + result.stderr
     run_dir = tmp_path / 'smoke'
     assert [s for s, _ in checkpoints(run_dir)] == [0, 150, 300]
@@ -79,11 +87,19 @@ def test_smoke_training_checkpoints_resumes_and_loads(tmp_path):
     summary = json.loads((run_dir / 'summary.json').read_text())
     assert summary['num_timesteps'] == 300 and 0 < summary['env_share'] < 1
     assert summary['config']['learning_rate'] == 1e-4 and summary['config']['seed'] == 9
+    # kept on request (--keep-replay-buffer), tied to the last checkpoint
+    assert (run_dir / 'checkpoints' / 'replay_buffer.step').read_text() == '300'
     # the run keeps every sim parameter it was trained with, not just the overridden ones
     saved = load_yaml(run_dir / 'config.yaml')['sim_params']
     assert saved == dataclasses.asdict(SimConfig())
     # the learner's OpenMP threads wait passively (see nav_gym.timing) unless the user chose
     assert summary['omp_wait_policy'] == os.environ.get('OMP_WAIT_POLICY', 'PASSIVE')
+    # the time budget of a step (issue 12): the env's phases, the learner's share, the sim's
+    budget = summary['time_budget']
+    assert budget['env_step']['steps'] >= 290
+    for phase in ('transport_ms', 'image_ms', 'gradient_step_ms', 'predict_ms', 'step_ms'):
+        assert budget['env_step'][phase] > 0, phase
+    assert budget['env_step']['live_ms'] == 0.0  # no --live
 
     result = run([ros2_run('nav_gym', 'train'), '--resume', str(run_dir),
                   '--total-timesteps', '450'])
@@ -118,14 +134,15 @@ def test_ctrl_c_saves_a_checkpoint_and_reaps_the_sim(tmp_path):
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     run_dir = tmp_path / 'stop'
     deadline = time.monotonic() + 120
-    while not (run_dir / 'checkpoints' / 'dqn_0_steps.zip').exists():
+    # learning is under way once the first episode is in the Monitor CSV
+    while len(monitor_rows(run_dir / 'monitor.csv')) < 1:
         assert process.poll() is None and time.monotonic() < deadline
         time.sleep(0.2)
-    time.sleep(3.0)
     process.send_signal(signal.SIGINT)
     out, err = process.communicate(timeout=120)
     assert process.returncode == 130, out + err
     assert 'interrupted at step' in out and 'Traceback' not in err
+    assert f'continue with: nav-gym-train --resume {run_dir}' in out
     steps = checkpoints(run_dir)[-1][0]
     assert steps > 0
     assert json.loads((run_dir / 'summary.json').read_text())['interrupted'] is True
@@ -140,8 +157,35 @@ def test_config_file_and_flags_override_defaults(tmp_path):
     with pytest.raises(TrainConfigError, match='unknown setting'):
         build(None, {'learning_rat': 1})
     path.write_text('batch_size: many\n')
-    with pytest.raises(TrainConfigError, match='batch_size must be int'):
+    with pytest.raises(TrainConfigError, match='batch_size takes an integer'):
         build(str(path), {})
+
+
+def test_settings_convert_as_every_other_setting_does():
+    """One conversion (nav_sim.config.convert): '4.0' is 4; 3.7 and 'yes' are errors."""
+    config = build(None, {'batch_size': '4.0', 'keep_replay_buffer': 'TRUE',
+                          'learning_rate': '5e-4', 'goal_reward': '10'})
+    assert (config.batch_size, config.keep_replay_buffer) == (4, True)
+    assert (config.learning_rate, config.goal_reward) == (5e-4, 10.0)
+    for key, value in (('batch_size', 3.7), ('batch_size', '3.7'), ('keep_replay_buffer', 'yes'),
+                       ('batch_size', True), ('learning_rate', 'fast')):
+        with pytest.raises(TrainConfigError, match=key):
+            build(None, {key: value})
+
+
+def test_a_run_saves_its_whole_env_config(tmp_path):
+    """Reward weights and every other EnvConfig field travel with the run's config.yaml."""
+    from nav_gym.config import EnvConfig
+    from nav_gym.run_dir import load_config
+    config = TrainConfig(goal_reward=10.0, step_penalty=-0.05, probe_timeout=0.5)
+    assert {f.name for f in dataclasses.fields(EnvConfig)} <= set(dataclasses.asdict(config))
+    env = config.env_config()
+    assert (env.goal_reward, env.step_penalty, env.probe_timeout) == (10.0, -0.05, 0.5)
+    (tmp_path / 'config.yaml').write_text(config.to_yaml())
+    assert load_config(tmp_path) == config
+    # a run from before these settings existed still loads, with the defaults of that time
+    (tmp_path / 'config.yaml').write_text('learning_rate: 0.0001\nforward_speed: 0.12\n')
+    assert load_config(tmp_path).env_config() == EnvConfig()
 
 
 def test_train_yaml_holds_every_default():
@@ -150,8 +194,8 @@ def test_train_yaml_holds_every_default():
     import yaml
 
     from nav_gym.train_config import TrainConfig
-    share = Path(get_package_prefix('nav_gym')) / 'share' / 'nav_gym' / 'config' / 'train.yaml'
-    values = yaml.safe_load(share.read_text())
+    source = Path(__file__).parents[2] / 'config' / 'train.yaml'  # installed by make setup
+    values = yaml.safe_load(source.read_text())
     defaults = dataclasses.asdict(TrainConfig())
     assert values == defaults
 

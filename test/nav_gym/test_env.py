@@ -2,19 +2,23 @@
 
 from __future__ import annotations
 
+import re
 import signal
 import time
 
 import gymnasium as gym
 import numpy as np
 import pytest
+from std_srvs.srv import Trigger
 
 import nav_gym
 from nav_gym.checks import check_checkers, drive_forward, drive_to_goal
 from nav_gym.config import EnvConfig
 from nav_gym.env import NavigationEnv, reward_terms
 from nav_gym.errors import InvalidActionError, ResetNeededError
-from nav_sim.errors import ScenarioError, SimUnavailableError
+from nav_sim.client import SimClient
+from nav_sim.errors import ScenarioError, SimConflictError, SimUnavailableError
+from nav_sim.sim_graph import CONFLICT
 from nav_sim.sim_process import SimProcess
 
 
@@ -126,7 +130,9 @@ def test_invalid_actions_are_rejected(env, action):
 @pytest.mark.parametrize('action', [np.int64(1), np.array(2), np.array([0])])
 def test_numpy_actions_are_accepted(env, action):
     env.reset(seed=107)
-    env.step(action)
+    info = env.step(action)[4]
+    assert info['action_name'] == ('left', 'forward', 'right')[int(np.asarray(action).item())]
+    assert info['step'] == 1
 
 
 def test_unknown_split_is_a_clear_error(env):
@@ -182,3 +188,76 @@ def test_render_returns_the_native_camera_image(namespace):
         assert abs(float(frame.mean()) - float(obs.mean())) < 2.0
     finally:
         own.close()
+
+
+@pytest.mark.parametrize('options', [{}, {'scenario_seed': 2**64}])
+@pytest.mark.parametrize('seed', [2**64, 2**63, -1])
+def test_seeds_outside_the_sim_range_are_a_clear_error(env, seed, options):
+    with pytest.raises(ScenarioError, match=r'seed must be in \[0, 2\*\*63\), got '):
+        env.reset(seed=seed, options=options)  # an opaque SystemError from rclpy before
+    with pytest.raises(ScenarioError, match=r'seed must be in \[0, 2\*\*63\), got 1844'):
+        env.reset(seed=1, options={'scenario_seed': 2**64})
+    assert env.reset(seed=2**63 - 1)[1]['seed'] == 2**63 - 1
+
+
+def _refusal(**settings: object) -> str:
+    """Connect an env and run episodes until it refuses to work with two sims; the reason.
+
+    A new client discovers the sims of a namespace within seconds: it refuses as soon as it
+    sees a second one (when it connects, at a reset, or when frames of two worlds arrive).
+    """
+    env = None
+    deadline = time.monotonic() + 60.0
+    try:
+        env = NavigationEnv(**settings)
+        while time.monotonic() < deadline:
+            env.reset(seed=1)
+            env.step(1)
+    except SimConflictError as exc:
+        return str(exc)
+    finally:
+        if env is not None:
+            env.close()
+    pytest.fail(f'an env with {settings} drove two sims in one namespace for 60 s')
+
+
+def _refused_by_the_sim(client: SimClient) -> str:
+    """Call reset until the sim refuses it, having discovered the other sim and its name."""
+    deadline = time.monotonic() + 60.0
+    while time.monotonic() < deadline:
+        response = client._call(client.cli_reset, Trigger.Request(), 'reset')
+        if not response.success and '_UNKNOWN_' not in response.message:
+            return response.message
+        client.spin_until(lambda: False, 0.1)  # discovery takes its time
+    pytest.fail('the sims did not see each other within 60 s')
+
+
+def test_two_sims_in_one_namespace_are_refused_naming_them(namespace):
+    settings = {'namespace': namespace, 'sim_timeout': 30.0, 'probe_timeout': 10.0}
+    conflict = rf"^{CONFLICT}: 2 nodes in namespace '{namespace}' "
+    with SimProcess(namespace=namespace) as first:
+        env = NavigationEnv(sim='attach', **settings)
+        try:
+            env.reset(seed=1)
+            with SimProcess(namespace=namespace, params={'train_bank_seed': 1001}):
+                # the sim refuses to reset next to another one, naming both
+                message = _refused_by_the_sim(env.client)
+                assert re.match(conflict, message), message
+                assert f'({namespace}/sim_node, {namespace}/sim_node)' in message
+                # so does the attached env (before: observations from both worlds)
+                with pytest.raises(SimConflictError, match=conflict):
+                    env.reset(seed=1)
+                for sim in ('attach', 'auto'):
+                    assert re.match(conflict, _refusal(sim=sim, **settings))
+                assert re.search(f"{conflict}|^namespace '{namespace}' already has a nav_sim",
+                                 _refusal(sim='embedded', **settings))
+                # and it left no third sim there
+                assert env.client.spin_until(lambda: len(env.client.sim_nodes()) == 2, 30.0)
+            assert env.client.spin_until(lambda: len(env.client.sim_nodes()) == 1, 30.0)
+            env.reset(seed=1)  # one sim again: fine
+        finally:
+            env.close()
+        # 'embedded' into a namespace that has one sim is refused too
+        assert f"namespace '{namespace}' already has a nav_sim" in _refusal(sim='embedded',
+                                                                             **settings)
+        assert first.alive()

@@ -21,5 +21,5 @@ def sim() -> Iterator[NavSim]:
 
 @pytest.fixture
 def namespace() -> str:
-    """A namespace no other test (or test run) uses."""
+    """Return a namespace no other test (or test run) uses."""
     return f'/t{os.getpid()}_{next(_names)}'

@@ -1,9 +1,12 @@
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, example, given, settings
+from hypothesis import strategies as st
 
 from nav_sim.config import SimConfig
 from nav_sim.errors import EpisodeNotStartedError
@@ -192,8 +195,8 @@ def epuck_sim():
 
 
 def test_the_goal_stays_visible_up_to_the_success_distance(epuck_sim):
-    """At the success radius the camera is ~1 cm from the goal marker: it must fill the view
-    (MuJoCo's default near plane, relative to the model extent, used to clip it away)."""
+    # At the success radius the camera is ~1 cm from the goal marker: it must fill the view
+    # (MuJoCo's default near plane, relative to the model extent, used to clip it away).
     distance = CFG.goal_radius + 0.005  # just outside success
     place(epuck_sim, 0.0, 0.0, 0.0, (distance, 0.0))
     assert epuck_sim.distance > CFG.goal_radius
@@ -217,3 +220,65 @@ def test_a_wall_just_ahead_is_seen(epuck_sim):
     wall = np.array([0.78, 0.76, 0.70]) * 255
     centre = image[20:76, 30:98].reshape(-1, 3)
     assert float(np.mean(np.abs(centre - wall).max(axis=1) < 60)) > 0.9
+
+
+# --- any Twist: finite, bounded wheel speeds and a finite state (issue 10, defect 2) ---------
+FLOAT64 = st.floats(allow_nan=True, allow_infinity=True, allow_subnormal=True)
+EXTREMES = [(1e308, 0.0), (0.0, 1.4e308), (3.7e306, 0.0), (-1.7e308, 1.4e308),
+            (1.7976931348623157e308, -1.7976931348623157e308), (-1.7976931348623157e308, 1.0),
+            (5e-324, -5e-324), (2.2250738585072014e-308, 1e308), (1e-320, 0.0),
+            (math.nan, 0.0), (0.0, math.inf), (-math.inf, math.nan), (1e308, math.inf)]
+
+
+def exact_wheels(linear: float, angular: float, config: SimConfig) -> tuple[Fraction, Fraction]:
+    """Compute the saturated wheel speeds of a command in exact rational arithmetic."""
+    half_axle, radius = Fraction(config.axle_length) / 2, Fraction(config.wheel_radius)
+    left = (Fraction(linear) - Fraction(angular) * half_axle) / radius
+    right = (Fraction(linear) + Fraction(angular) * half_axle) / radius
+    peak, limit = max(abs(left), abs(right)), Fraction(config.max_wheel_speed)
+    scale = limit / peak if peak > limit else Fraction(1)
+    return left * scale, right * scale
+
+
+def with_examples(test):  # noqa: ANN001, ANN201 - decorator
+    for linear, angular in EXTREMES:
+        test = example(linear, angular)(test)
+    return test
+
+
+@settings(max_examples=400, deadline=None, database=None)
+@with_examples
+@given(linear=FLOAT64, angular=FLOAT64)
+def test_any_twist_gives_finite_wheel_speeds_within_the_limit(linear, angular):
+    if not (math.isfinite(linear) and math.isfinite(angular)):
+        with pytest.raises(ValueError, match='non-finite'):  # the node stops the motors
+            twist_to_wheels(linear, angular, CFG)
+        return
+    command = twist_to_wheels(linear, angular, CFG)
+    limit = CFG.max_wheel_speed
+    for speed in (command.left, command.right):
+        assert math.isfinite(speed) and abs(speed) <= limit
+    # the same wheel speeds as exact arithmetic gives, so the curvature is kept to rounding
+    left, right = exact_wheels(linear, angular, CFG)
+    tolerance = 1e-12 * float(max(abs(left), abs(right))) + 1e-300
+    assert abs(command.left - float(left)) <= tolerance
+    assert abs(command.right - float(right)) <= tolerance
+    peak = max(abs(left), abs(right)) / Fraction(limit)
+    if abs(peak - 1) > Fraction(1, 10**9):
+        assert command.saturated == (peak > 1)
+
+
+@settings(max_examples=60, deadline=None, database=None,
+          suppress_health_check=[HealthCheck.too_slow])
+@with_examples
+@given(linear=FLOAT64, angular=FLOAT64)
+def test_no_twist_makes_the_sim_state_non_finite(sim, linear, angular):
+    try:
+        command = twist_to_wheels(linear, angular, CFG)
+    except ValueError:
+        command = WheelCommand(0.0, 0.0)  # what sim_node does with a non-finite command
+    if sim.scenario is None or sim.done:
+        sim.reset(101, 'train')
+    result = sim.step(command)
+    assert all(math.isfinite(v) for v in (*result.pose, result.distance, sim.path_length))
+    assert all(math.isfinite(v) for v in sim.twist)

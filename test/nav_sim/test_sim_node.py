@@ -143,6 +143,11 @@ def test_bad_velocities_are_contained(node):
     frame = client.step(1e9, 0.0, frame)
     assert frame.event['wheel_left'] == pytest.approx(CFG.max_wheel_speed)
     assert math.isfinite(frame.pose[0])
+    for linear, angular in ((1e308, 0.0), (-1.7e308, 1.4e308)):  # overflowed to NaN before
+        frame = client.step(linear, angular, frame)
+        wheels = (frame.event['wheel_left'], frame.event['wheel_right'])
+        assert max(abs(w) for w in wheels) == pytest.approx(CFG.max_wheel_speed)
+        assert all(math.isfinite(v) for v in (*frame.pose, frame.event['distance']))
     stopped = client.stop()
     assert stopped == [0.0, 0.0]
     assert process.poll() is None

@@ -1,0 +1,305 @@
+"""Aggregate a sweep's trials into ``Sweep.md``, ``Sweep.html``, ``results.json`` and figures.
+
+Reads only files (no ROS, no Ray): each trial is a run directory as ``nav-gym-train`` writes it
+with its ``eval/results.json`` (final model on the training and held-out seeds) and
+``eval/curve/<steps>/results.json`` (held-out success per checkpoint); baselines are
+``baselines/<config>.json``.  Trials with the same training settings (all but the seed and
+bookkeeping such as the run name) form one configuration.  The same trials aggregated twice give
+identical files (fixed bootstrap seed, PNGs without a software/date stamp).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nav_eval import stats
+from nav_eval.report_format import pct, table, to_html
+from nav_eval.sweep_figures import write_figures
+from nav_gym import run_dir as layout
+from nav_gym.train_config import TrainConfig
+
+FINAL_SETS = {'train': 'dqn_train', 'heldout': 'dqn_heldout'}
+BOOKKEEPING = ('seed', 'run_name', 'runs_dir', 'device', 'namespace', 'sim', 'sim_timeout',
+               'save_replay_buffer', 'keep_replay_buffer')
+FIGURES = (('intervals', 'Interval estimates per configuration: success'),
+           ('intervals_collision', 'Interval estimates per configuration: collisions'),
+           ('profile', 'Performance profile of held-out success'),
+           ('curve', 'Sample efficiency'), ('improvement', 'Probability of improvement'))
+#: every section heading of Sweep.md (probability of improvement only with > 1 configuration)
+SECTIONS = ('Configurations: held-out success and collisions', *(c for _, c in FIGURES),
+            'Per seed', 'Bank difficulty')
+RATES = ('success_rate', 'collision_rate', 'timeout_rate', 'mean_spl')
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def trial_dirs(folder: Path) -> list[Path]:
+    """Return the run directories of a sweep (``trials/*``) or of a folder of runs."""
+    root = folder / 'trials' if (folder / 'trials').is_dir() else folder
+    return sorted(p for p in root.iterdir() if (p / layout.CONFIG).is_file()) \
+        if root.is_dir() else []
+
+
+def read_trial(run_dir: Path) -> dict[str, Any]:
+    """Collect one trial's seed, settings, final evaluation and curve points."""
+    config = layout.load_config(run_dir)
+    results = _read_json(run_dir / layout.EVAL / layout.RESULTS) or {}
+    sets = {s['name']: s for s in results.get('sets', [])}
+    final = {split: sets[name] for split, name in FINAL_SETS.items() if name in sets}
+    curve = {}
+    for path in sorted((run_dir / layout.EVAL / 'curve').glob('*/results.json')):
+        data = _read_json(path) or {}
+        for s in data.get('sets', []):
+            curve[int(path.parent.name)] = {'success_rate': s['summary']['success_rate'],
+                                            'seeds': s['seeds']}
+    summary = _read_json(run_dir / layout.SUMMARY) or {}
+    key = {k: v for k, v in vars(config).items() if k not in BOOKKEEPING}
+    return {'name': run_dir.name, 'run_dir': run_dir, 'seed': config.seed, 'settings': key,
+            'final': final, 'curve': curve, 'finished': (run_dir / layout.FINAL_MODEL).is_file(),
+            'wall_clock_s': summary.get('wall_clock_total_s'),
+            'steps': summary.get('num_timesteps')}
+
+
+def group_trials(trials: list[dict[str, Any]], names: dict[str, str]) -> dict[str, list[dict]]:
+    """Group trials by their settings.
+
+    A group is named from ``names`` (trial -> config) or by the settings that differ between
+    groups (or from the defaults).
+    """
+    groups: list[tuple[dict, list[dict]]] = []
+    for trial in trials:
+        for settings, members in groups:
+            if settings == trial['settings']:
+                members.append(trial)
+                break
+        else:
+            groups.append((trial['settings'], [trial]))
+    defaults = {k: v for k, v in vars(TrainConfig().with_full_sim_params()).items()
+                if k not in BOOKKEEPING}
+    out: dict[str, list[dict]] = {}
+    for settings, members in groups:
+        label = next((names[m['name']] for m in members if m['name'] in names), None)
+        if label is None:
+            others = [s for s, _ in groups if s is not settings] or [defaults]
+            label = _difference_label(settings, others)
+        out[label] = sorted(members, key=lambda m: m['seed'])
+    return out
+
+
+def _flat(settings: dict[str, Any]) -> dict[str, Any]:
+    flat = {k: v for k, v in settings.items() if k != 'sim_params'}
+    flat.update(settings.get('sim_params') or {})
+    return flat
+
+
+def _difference_label(settings: dict, others: list[dict]) -> str:
+    mine = _flat(settings)
+    keys = sorted({k for o in others for k, v in _flat(o).items() if mine.get(k) != v})
+    return ', '.join(f'{k}={mine.get(k)}' for k in keys) or 'defaults'
+
+
+def per_seed_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
+    """Return one row per trial: rates and SPL on the training and held-out sets."""
+    rows = []
+    for config, members in groups.items():
+        for t in members:
+            row: dict[str, Any] = {'config': config, 'trial': t['name'], 'seed': t['seed'],
+                                   'steps': t['steps'], 'wall_clock_s': t['wall_clock_s']}
+            for split, entry in t['final'].items():
+                for rate in RATES:
+                    row[f'{split}_{rate}'] = entry['summary'][rate]
+                row[f'{split}_episodes'] = entry['summary']['episodes']
+            rows.append(row)
+    return rows
+
+
+def configuration_stats(groups: dict[str, list[dict]]) -> dict[str, Any]:
+    """Return the rliable aggregates per configuration (held-out success and collisions)."""
+    out: dict[str, Any] = {}
+    for metric in ('success_rate', 'collision_rate'):
+        scores = {c: stats.score_matrix([t['final']['heldout']['summary'][metric]
+                                         for t in m if 'heldout' in t['final']])
+                  for c, m in groups.items() if any('heldout' in t['final'] for t in m)}
+        if scores:
+            out[metric] = stats.aggregate_estimates(scores, metric)
+    return out
+
+
+def curve_scores(groups: dict[str, list[dict]]) -> dict[str, Any]:
+    """Return per configuration the checkpoints every trial evaluated and a score matrix."""
+    out = {}
+    for config, members in groups.items():
+        common = sorted(set.intersection(*(set(t['curve']) for t in members))) if members \
+            else []
+        if not common:
+            continue
+        matrix = np.array([[[t['curve'][s]['success_rate'] for s in common]] for t in members])
+        out[config] = {'steps': common, 'scores': matrix,
+                       'seeds': members[0]['curve'][common[0]]['seeds']}
+    return out
+
+
+def bank_rows(folder: Path, groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
+    """Return success on both banks with CIs over scenarios: baselines and the DQN trials."""
+    rows = []
+    for config in groups:
+        baseline = _read_json(folder / 'baselines' / f'{config}.json') or {}
+        by_policy: dict[str, dict[str, list]] = {}
+        for s in baseline.get('sets', []):
+            by_policy.setdefault(s['policy'], {})[s['split']] = s['episodes']
+        dqn = {split: [e for t in groups[config] for e in t['final'].get(split, {})
+                       .get('episodes', [])] for split in FINAL_SETS}
+        if all(dqn.values()):
+            by_policy['DQN final (all seeds pooled)'] = dqn
+        for policy, splits in by_policy.items():
+            if set(splits) != set(FINAL_SETS):
+                continue
+            estimates = stats.mean_estimates({split: stats.outcome_scores(splits[split])
+                                              for split in FINAL_SETS})
+            rows.append({'config': config, 'policy': policy, **estimates,
+                         'episodes': {k: len(v) for k, v in splits.items()}})
+    return rows
+
+
+def _ci(estimate: dict[str, float] | None, digits: int = 0) -> str:
+    if not estimate:
+        return '–'
+    return (f"{pct(estimate['point'], digits)} [{pct(estimate['low'], digits)}, "
+            f"{pct(estimate['high'], digits)}]")
+
+
+def _markdown(folder: Path, data: dict[str, Any], figures: dict[str, str]) -> str:
+    lines = [f'# Sweep: {folder.name}', '',
+             f"{len(data['trials'])} trials in {len(data['configurations'])} configuration(s). "
+             'Intervals are 95 % stratified-bootstrap CIs (rliable, percentile method, '
+             f'{stats.REPS} resamples, random state {stats.RANDOM_STATE}) over the training '
+             'seeds of a configuration; for the banks, over scenarios.', '']
+    lines += [f'## {SECTIONS[0]}', '']
+    rows = []
+    for config, members in data['configurations'].items():
+        for metric in ('success_rate', 'collision_rate'):
+            est = data['aggregates'].get(metric, {}).get(config)
+            if est:
+                rows.append([config, metric.replace('_', ' '), len(members)]
+                            + [_ci(est[a]) for a in stats.AGGREGATES])
+    lines += table(['Configuration', 'Held-out', 'Seeds', *stats.AGGREGATES], rows)
+    lines += ['The optimality gap of the collision rate is its gap to 0 collisions.', '']
+    for key, caption in FIGURES:
+        if key in figures:
+            lines += [f'## {caption}', '', f'![{caption}]({figures[key]})', '']
+    if 'improvement' in data and data['improvement']:
+        rows = [[k.replace(',', ' > '), _ci(v, 0)] for k, v in data['improvement'].items()]
+        lines += table(['P(X > Y), held-out success', 'estimate [95 % CI]'], rows)
+    lines += ['## Per seed', '']
+    head = ['Configuration', 'Trial', 'Seed', 'Steps']
+    for split in ('train', 'heldout'):
+        head += [f'{split} success', f'{split} collision', f'{split} timeout', f'{split} SPL']
+    rows = []
+    for r in data['per_seed']:
+        row = [r['config'], r['trial'], r['seed'], r['steps']]
+        for split in ('train', 'heldout'):
+            row += [pct(r.get(f'{split}_{k}')) for k in RATES[:3]]
+            row += ['–' if r.get(f'{split}_mean_spl') is None else f"{r[f'{split}_mean_spl']:.3f}"]
+        rows.append(row)
+    lines += table(head, rows)
+    lines += ['## Bank difficulty', '',
+              'Success on the training bank and the held-out bank, each with its CI over '
+              'scenarios: the random policy, the image-only servo (`nav_eval.policies.'
+              'ServoPolicy`) and the trained models.', '']
+    rows = [[r['config'], r['policy'], f"{r['episodes']['train']} + {r['episodes']['heldout']}",
+             _ci(r['train']), _ci(r['heldout'])] for r in data['banks']]
+    lines += table(['Configuration', 'Policy', 'Episodes', 'Training bank', 'Held-out bank'],
+                   rows)
+    lines += [f"Verdict: {data['bank_verdict']}.", '']
+    if data['failed']:
+        lines += ['## Failed trials', '']
+        for name, error in sorted(data['failed'].items()):
+            lines += [f'- **{name}** failed twice (Tune retried it once):', '', '```text',
+                      *error.splitlines(), '```', '']
+    if data['missing']:
+        lines += ['## Missing', ''] + [f'- {m}' for m in data['missing']] + ['']
+    return '\n'.join(lines)
+
+
+def _jsonable(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _jsonable(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        return round(float(value), 6)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, Path):
+        return value.name
+    return value
+
+
+def write_sweep_report(folder: Path) -> Path:
+    """Aggregate the trials under ``folder``; write the report files; return Sweep.md."""
+    from nav_eval.errors import NavEvalError
+    runs = trial_dirs(folder)
+    if not runs:
+        raise NavEvalError(f'{folder} holds no run directories (trials/*/config.yaml): run a '
+                           'sweep with `visnav-sweep` or pass a folder of training runs')
+    spec = _read_json(folder / 'sweep.json') or {}
+    names = _trial_configs(folder, spec)
+    trials = [read_trial(r) for r in runs]
+    groups = group_trials(trials, names)
+    missing = [f"{t['name']}: no final evaluation; run `{_missing_eval(t['run_dir'], spec)}`"
+               for t in trials if len(t['final']) < 2]
+    banks = bank_rows(folder, groups)
+    data: dict[str, Any] = {
+        'configurations': {c: [t['name'] for t in m] for c, m in groups.items()},
+        'trials': [t['name'] for t in trials], 'per_seed': per_seed_rows(groups),
+        'aggregates': configuration_stats(groups), 'banks': banks,
+        'bank_verdict': stats.bank_verdict([r for r in banks]), 'missing': missing,
+        'failed': _read_json(folder / 'failed.json') or {},
+        'settings': {c: m[0]['settings'] for c, m in groups.items()}}
+    curves = curve_scores(groups)
+    success = {c: stats.score_matrix([t['final']['heldout']['summary']['success_rate']
+                                      for t in m if 'heldout' in t['final']])
+               for c, m in groups.items() if any('heldout' in t['final'] for t in m)}
+    if len(success) > 1:
+        data['improvement'] = stats.probability_of_improvement(success)
+    figures = write_figures(folder / 'figures', data, success, curves)
+    data['sample_efficiency'] = {c: {'steps': v['steps'], 'seeds': v['seeds'],
+                                     'iqm': v['iqm'], 'low': v['low'], 'high': v['high']}
+                                 for c, v in curves.items() if 'iqm' in v}
+    text = _markdown(folder, data, {k: f'figures/{v}' for k, v in figures.items()})
+    (folder / 'Sweep.md').write_text(text + '\n')
+    (folder / 'Sweep.html').write_text(to_html(text, folder, f'sweep {folder.name}'))
+    (folder / 'results.json').write_text(json.dumps(_jsonable(data), indent=1,
+                                                    sort_keys=True) + '\n')
+    return folder / 'Sweep.md'
+
+
+def _missing_eval(run_dir: Path, spec: dict[str, Any]) -> str:
+    from nav_eval.sweep_trial import seed_text
+    train = seed_text(spec.get('train_seeds', list(range(101, 201))))
+    heldout = seed_text(spec.get('heldout_seeds', list(range(201, 301))))
+    return (f'nav-eval-evaluate {run_dir} --sets dqn_train,dqn_heldout --train-seeds {train} '
+            f'--heldout-seeds {heldout} --no-record')
+
+
+def _trial_configs(folder: Path, spec: dict[str, Any]) -> dict[str, str]:
+    """Map trial names to configuration names from ``sweep.json`` (empty without one)."""
+    if not spec:
+        return {}
+    from nav_eval.sweep import SweepSpec
+    try:
+        trials = SweepSpec(**{**spec, 'sweep_dir': str(folder)}).trials()
+    except TypeError:
+        return {}
+    return {t['name']: t['config'] for t in trials if t['kind'] == 'train'}

@@ -1,0 +1,227 @@
+"""One trial of a sweep: the plain commands as child processes, in a ROS domain of its own.
+
+A training trial is ``nav-gym-train`` (or ``--resume`` from the newest checkpoint when the
+run directory already holds one), then one child (``python -m nav_eval.sweep_trial``) that
+evaluates with ``nav_eval.evaluate`` the final model on the sweep's training and held-out seeds,
+and every checkpoint on a small held-out set for the sample-efficiency curve.  A baseline trial
+is ``python -m nav_eval.baselines`` for one configuration.  Every stage whose output exists is
+skipped, so a retried or resumed trial continues where it stopped.  Children run with a
+host-locally reserved ``ROS_DOMAIN_ID``, localhost discovery, the trial's CPU count as their
+thread count, and die with the process that started them.  No Ray import: the sweep calls
+:func:`run_trial` from its Tune trainable.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from nav_eval.errors import NavEvalError
+from nav_gym import run_dir as layout
+from nav_gym.checkpoints import checkpoints
+from nav_sim.domain import reserve_any_domain
+from nav_sim.sim_process import _stop_with_parent
+
+LOG_TAIL_LINES = 15
+CURVE = 'curve'  # RUN/eval/curve/<steps>/results.json: the sample-efficiency evaluations
+THREAD_VARIABLES = ('OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'OPENBLAS_NUM_THREADS')
+
+
+class TrialFailedError(NavEvalError, RuntimeError):
+    """A stage of a trial exited with an error; the message ends with the tail of its log."""
+
+
+def log_tail(path: Path, lines: int = LOG_TAIL_LINES) -> str:
+    """Return the last ``lines`` lines of a log file ('' if there is none)."""
+    try:
+        text = path.read_text(errors='replace')
+    except OSError:
+        return ''
+    return '\n'.join(text.rstrip().splitlines()[-lines:])
+
+
+def child_environment(base: dict[str, str], cpus: int) -> dict[str, str]:
+    """Return ``base`` with the children's thread counts set to the trial's CPUs."""
+    env = dict(base)
+    for name in THREAD_VARIABLES:
+        env[name] = str(max(1, cpus))
+    env.setdefault('MUJOCO_GL', 'egl')
+    env.pop('RAY_ADDRESS', None)
+    return env
+
+
+def run_child(command: list[str], env: dict[str, str], log: Path) -> None:
+    """Run one stage, its output appended to ``log``; raise TrialFailedError if it fails."""
+    with open(log, 'ab') as handle:
+        handle.write(f'\n$ {" ".join(command)}\n'.encode())
+        handle.flush()
+        start = time.monotonic()
+        # its own session: signals to the worker's process group do not reach it; it gets
+        # exactly one SIGTERM when the worker dies (and then saves a checkpoint and exits)
+        process = subprocess.Popen(command, stdout=handle, stderr=subprocess.STDOUT, env=env,
+                                   stdin=subprocess.DEVNULL, preexec_fn=_stop_with_parent,
+                                   start_new_session=True)
+        # if this thread ends early (the trial is stopped), the child gets its one SIGTERM
+        # from PR_SET_PDEATHSIG: a second signal would interrupt the checkpoint it then saves
+        code = process.wait()
+        handle.write(f'# exit code {code} after {time.monotonic() - start:.1f} s\n'.encode())
+    if code != 0:
+        stage = ' '.join(command[2:4])[:60]
+        raise TrialFailedError(f'`{stage}` exited with code {code}; the end of {log}:\n'
+                               f'{log_tail(log)}')
+
+
+def train_command(trial: dict[str, Any]) -> list[str] | None:
+    """Return the training stage of a trial (fresh or ``--resume``), or None when it is done."""
+    run_dir = Path(trial['run_dir'])
+    if (run_dir / layout.FINAL_MODEL).is_file():
+        return None
+    python = [sys.executable, '-m', 'nav_gym.train']
+    device = ['--device', 'cuda' if trial['gpus'] > 0 else 'cpu']
+    if (run_dir / layout.CONFIG).is_file() and checkpoints(run_dir):
+        return python + ['--resume', str(run_dir)] + device
+    if run_dir.exists():  # stopped before its first checkpoint: nothing to resume from
+        shutil.rmtree(run_dir)
+    return python + ['--config', trial['config_file'], '--seed', str(trial['seed']),
+                     '--runs-dir', str(run_dir.parent), '--run-name', run_dir.name] + device
+
+
+def has_sets(results: Path, names: list[str], seeds: dict[str, list[int]]) -> bool:
+    """Tell whether an evaluation's results hold every named set on the expected seeds."""
+    try:
+        sets = {s['name']: s for s in json.loads(results.read_text())['sets']}
+    except (OSError, ValueError, KeyError, TypeError):
+        return False
+    return all(n in sets and sets[n]['seeds'] == seeds[n] for n in names)
+
+
+def missing_evaluations(trial: dict[str, Any]) -> list[tuple[str, str | None, Path]]:
+    """Return the evaluations still to run as (set names, checkpoint, output folder).
+
+    The final model on the training and held-out seeds, then every checkpoint after step 0 on
+    the curve seeds (the sample-efficiency curve).
+    """
+    run_dir = Path(trial['run_dir'])
+    todo: list[tuple[str, str | None, Path]] = []
+    final = {'dqn_train': trial['train_seeds'], 'dqn_heldout': trial['heldout_seeds']}
+    if not has_sets(run_dir / layout.EVAL / layout.RESULTS, list(final), final):
+        todo.append(('dqn_train,dqn_heldout', None, run_dir / layout.EVAL))
+    if trial['curve_seeds']:
+        for steps, path in checkpoints(run_dir):
+            out = run_dir / layout.EVAL / CURVE / str(steps)
+            if steps > 0 and not has_sets(out / layout.RESULTS, ['early_heldout'],
+                                          {'early_heldout': trial['curve_seeds']}):
+                todo.append(('early_heldout', str(path.relative_to(run_dir)), out))
+    return todo
+
+
+def evaluate_trial(trial: dict[str, Any]) -> None:
+    """Run a trial's missing evaluations in this process (one torch import for all of them)."""
+    from nav_eval import evaluate
+    run_dir = Path(trial['run_dir'])
+    for names, early, out in missing_evaluations(trial):
+        seeds = trial['curve_seeds'] if early else trial['heldout_seeds']
+        sets = evaluate.plan_sets(run_dir, names.split(','), tuple(trial['train_seeds']),
+                                  tuple(seeds), early=early)
+        evaluate.evaluate(run_dir, sets, out, record=trial['record'] and early is None)
+        print(f'evaluated {names} ({early or "final model"}) -> {out}', flush=True)
+
+
+def eval_command(trial: dict[str, Any]) -> list[str] | None:
+    """Return the evaluation stage of a trial, or None when every evaluation exists."""
+    if not missing_evaluations(trial):
+        return None
+    return [sys.executable, '-m', 'nav_eval.sweep_trial', json.dumps(trial)]
+
+
+def baseline_command(trial: dict[str, Any]) -> list[str] | None:
+    """Return the baseline stage of a configuration, or None when its results exist."""
+    out = Path(trial['out'])
+    names = [f'{p}_{s}' for p in ('random', 'servo') for s in ('train', 'heldout')]
+    seeds = {n: trial['train_seeds'] if n.endswith('_train') else trial['heldout_seeds']
+             for n in names}
+    if has_sets(out, names, seeds):
+        return None
+    return [sys.executable, '-m', 'nav_eval.baselines', '--config', trial['config_file'],
+            '--train-seeds', seed_text(trial['train_seeds']),
+            '--heldout-seeds', seed_text(trial['heldout_seeds']), '--out', str(out)]
+
+
+def seed_text(seeds: list[int]) -> str:
+    """Write seeds as evaluate parses them: '101-200' when contiguous, else a comma list."""
+    if seeds and seeds == list(range(seeds[0], seeds[0] + len(seeds))):
+        return f'{seeds[0]}-{seeds[-1]}'
+    return ','.join(str(s) for s in seeds)
+
+
+def headline(trial: dict[str, Any]) -> dict[str, Any]:
+    """Return a finished trial's headline figures (what the progress line and Tune show)."""
+    if trial['kind'] == 'baseline':
+        sets = json.loads(Path(trial['out']).read_text())['sets']
+        return {f"{s['name']}_success": s['summary']['success_rate'] for s in sets}
+    run_dir = Path(trial['run_dir'])
+    sets = json.loads((run_dir / layout.EVAL / layout.RESULTS).read_text())['sets']
+    out: dict[str, Any] = {}
+    for s in sets:
+        split = s['split']
+        out[f'{split}_success'] = s['summary']['success_rate']
+        out[f'{split}_collision'] = s['summary']['collision_rate']
+    try:
+        summary = json.loads((run_dir / layout.SUMMARY).read_text())
+        out['train_wall_s'] = summary.get('wall_clock_total_s')
+        out['steps_per_s'] = summary.get('steps_per_s')
+    except (OSError, ValueError):
+        pass
+    return out
+
+
+def run_trial(trial: dict[str, Any], report: Callable[[dict[str, Any]], None]) -> None:
+    """Run every remaining stage of one trial, then ``report`` its headline figures."""
+    log = Path(trial['log'])
+    log.parent.mkdir(parents=True, exist_ok=True)
+    start = time.monotonic()
+    with reserve_any_domain() as domain:
+        env = child_environment(domain.environment(), trial['cpus'])
+        with open(log, 'ab') as handle:
+            handle.write(f'\n# attempt at {time.strftime("%Y-%m-%d %H:%M:%S")}, '
+                         f'ROS_DOMAIN_ID={domain.domain_id}\n'.encode())
+        if trial['kind'] == 'baseline':
+            command = baseline_command(trial)
+            if command is not None:
+                Path(trial['out']).parent.mkdir(parents=True, exist_ok=True)
+                run_child(command, env, log)
+        else:
+            command = train_command(trial)
+            if command is not None:
+                run_child(command, env, log)
+            command = eval_command(trial)
+            if command is not None:
+                run_child(command, env, log)
+        figures = headline(trial)
+    report({**figures, 'domain_id': domain.domain_id, 'pid': os.getpid(),
+            'trial_wall_s': round(time.monotonic() - start, 1), 'complete': True})
+
+
+def main(argv: list[str] | None = None) -> None:
+    """Evaluate one trial (its JSON as the argument): the sweep's evaluation stage."""
+    from nav_gym.cli import run_command
+    from nav_gym.timing import quiet_learner_threads
+    args = sys.argv[1:] if argv is None else argv
+    quiet_learner_threads()  # before torch: the policy's forward passes must not spin
+
+    def body() -> int:
+        evaluate_trial(json.loads(args[0]))
+        return 0
+
+    run_command('nav_eval.sweep_trial', body)
+
+
+if __name__ == '__main__':
+    main()

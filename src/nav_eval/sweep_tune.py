@@ -1,0 +1,218 @@
+"""The Ray Tune side of a sweep: start or attach Ray, run the trials, report progress.
+
+Tune does the scheduling (a grid of trial dicts), the placement (``with_resources``: the trial's
+CPUs and GPUs), the retries (``FailureConfig(max_failures=1)``) and the resumption
+(``Tuner.restore`` of ``SWEEP_DIR/tune``).  Locally, Ray starts with this machine's CPUs and no
+dashboard and is shut down at the end; with ``--address`` the sweep attaches to a running
+cluster and leaves it running.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ray import tune
+
+from nav_eval.sweep_trial import log_tail, run_trial
+
+TUNE_DIR = 'tune'
+MAX_FAILURES = 1
+
+
+@dataclass
+class Outcome:
+    """What became of a sweep's trials."""
+
+    finished: list[str] = field(default_factory=list)
+    failed: dict[str, str] = field(default_factory=dict)
+    attempts: dict[str, int] = field(default_factory=dict)
+    interrupted: bool = False
+
+
+def trainable(config: dict[str, Any]) -> None:
+    """Run one trial (the Tune function trainable)."""
+    run_trial(config['trial'], tune.report)
+
+
+def _name(trial: Any) -> str:
+    return trial.config['trial']['name']
+
+
+def _percent(value: Any) -> str:
+    return '–' if value is None else f'{100 * float(value):.0f}%'
+
+
+class ProgressLines(tune.Callback):
+    """Print one line per trial start, retry, failure and end, with figures and the ETA."""
+
+    def __init__(self, total: int) -> None:
+        """Follow ``total`` trials."""
+        self.total = total
+        self.start = time.monotonic()
+        self.started: dict[str, float] = {}
+        self.durations: list[float] = []
+        self.results: dict[str, dict[str, Any]] = {}
+        self.ended = 0
+        self.parallel = 1
+
+    def _line(self, text: str) -> None:
+        elapsed = time.strftime('%H:%M:%S', time.gmtime(time.monotonic() - self.start))
+        print(f'[{elapsed}] {text}', flush=True)
+
+    def on_trial_start(self, iteration: int, trials: list, trial: Any, **info: Any) -> None:
+        """Print that a trial (re)started."""
+        self.started[_name(trial)] = time.monotonic()
+        running = sum(1 for t in trials if t.status == 'RUNNING')
+        self.parallel = max(self.parallel, running)
+        self._line(f'start {_name(trial)} ({running} running, {self.ended} of {self.total} '
+                   'done)')
+
+    def on_trial_result(self, iteration: int, trials: list, trial: Any, result: dict,
+                        **info: Any) -> None:
+        """Keep a trial's headline figures for its end line."""
+        self.results[_name(trial)] = result
+
+    def on_trial_recover(self, iteration: int, trials: list, trial: Any, **info: Any) -> None:
+        """Print that a failed trial will be retried."""
+        self._line(f'retry {_name(trial)}: it failed, see {trial.config["trial"]["log"]}')
+
+    def on_trial_error(self, iteration: int, trials: list, trial: Any, **info: Any) -> None:
+        """Print that a trial failed for good."""
+        self.ended += 1
+        self._line(f'FAILED {_name(trial)} ({self.ended} of {self.total} done)')
+
+    def on_trial_complete(self, iteration: int, trials: list, trial: Any, **info: Any) -> None:
+        """Print a finished trial's headline figures and the sweep's ETA."""
+        name = _name(trial)
+        self.ended += 1
+        took = time.monotonic() - self.started.get(name, self.start)
+        self.durations.append(took)
+        r = self.results.get(name, {})
+        if trial.config['trial']['kind'] == 'baseline':
+            figures = (f"random {_percent(r.get('random_train_success'))} / "
+                       f"{_percent(r.get('random_heldout_success'))}, servo "
+                       f"{_percent(r.get('servo_train_success'))} / "
+                       f"{_percent(r.get('servo_heldout_success'))} (training / held-out)")
+        else:
+            figures = (f"held-out success {_percent(r.get('heldout_success'))} (collisions "
+                       f"{_percent(r.get('heldout_collision'))}), training "
+                       f"{_percent(r.get('train_success'))}")
+        eta = eta_text(self.durations, self.total - self.ended, self.parallel)
+        self._line(f'done  {name} in {took:.0f} s: {figures}; {self.ended} of {self.total} '
+                   f'done, ETA {eta}')
+
+
+def eta_text(durations: list[float], remaining: int, parallel: int) -> str:
+    """Estimate the time left from finished trials' durations (mean x remaining waves)."""
+    if not durations or remaining <= 0:
+        return '–' if remaining else '0 s'
+    seconds = sum(durations) / len(durations) * -(-remaining // max(1, parallel))
+    return time.strftime('%H:%M:%S', time.gmtime(seconds)) if seconds < 86_400 else \
+        f'{seconds / 3600:.0f} h'
+
+
+def start_ray(address: str | None) -> bool:
+    """Attach to ``address`` or start a local Ray; return True if this call started it."""
+    import ray
+    os.environ.setdefault('RAY_CHDIR_TO_TRIAL_DIR', '0')  # trials use absolute paths
+    os.environ.setdefault('RAY_USAGE_STATS_ENABLED', '0')
+    os.environ.setdefault('TUNE_WARN_EXCESSIVE_EXPERIMENT_CHECKPOINT_SYNC_THRESHOLD_S', '60')
+    # a stopped trial's trainer gets SIGTERM from its parent's death (PR_SET_PDEATHSIG) and saves
+    # a checkpoint; Ray's default would SIGKILL it first and lose the steps since the last one
+    os.environ.setdefault('RAY_kill_child_processes_on_worker_exit', 'false')
+    # Ray runs workers (and so the trainers and sims they start) at nice 15 by default: on a
+    # machine shared with anything else the trials then get a fraction of their CPUs
+    os.environ.setdefault('RAY_worker_niceness', '0')
+    os.environ.setdefault('RAY_AIR_NEW_OUTPUT', '0')  # verbose=0 then prints nothing
+    for name in ('ray.tune', 'ray.train', 'ray.air'):  # our progress lines say it all
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+    if ray.is_initialized():
+        return False
+    if address:
+        ray.init(address=address, log_to_driver=False, logging_level=logging.WARNING)
+        return False
+    ray.init(num_cpus=os.cpu_count(), include_dashboard=False, log_to_driver=False,
+             logging_level=logging.WARNING)
+    return True
+
+
+def _tuner(spec: Any, trials: list[dict[str, Any]], total: int, resume: bool,
+           retry_failed: bool) -> tuple[Any, ProgressLines]:
+    resources = {'cpu': spec.cpus_per_trial, 'gpu': spec.gpus_per_trial}
+    fn = tune.with_resources(trainable, resources)
+    progress = ProgressLines(total)
+    path = str(Path(spec.sweep_dir) / TUNE_DIR)
+    if resume and tune.Tuner.can_restore(path):
+        tuner = tune.Tuner.restore(path, fn, resume_unfinished=True, resume_errored=False,
+                                   restart_errored=retry_failed)
+        # the restored run config holds the pickled callback of the first session: a fresh one
+        # (Tuner.restore takes no run config; this is its only handle)
+        local = getattr(tuner, '_local_tuner', None)
+        if local is not None and hasattr(local, '_run_config'):
+            local._run_config.callbacks = [progress]
+        return tuner, progress
+    run_config = tune.RunConfig(
+        name=TUNE_DIR, storage_path=spec.sweep_dir, verbose=0, callbacks=[progress],
+        failure_config=tune.FailureConfig(max_failures=MAX_FAILURES),
+        checkpoint_config=tune.CheckpointConfig(num_to_keep=1))
+    tuner = tune.Tuner(fn, param_space={'trial': tune.grid_search(trials)},
+                       tune_config=tune.TuneConfig(num_samples=1, reuse_actors=True,
+                                                   trial_dirname_creator=_dirname),
+                       run_config=run_config)
+    return tuner, progress
+
+
+def _dirname(trial: Any) -> str:
+    return _name(trial)
+
+
+def run_trials(spec: Any, trials: list[dict[str, Any]], address: str | None, resume: bool,
+               retry_failed: bool = False) -> Outcome:
+    """Run the trials on Ray Tune and return which finished, failed or were interrupted."""
+    started = start_ray(address)
+    try:
+        tuner, _ = _tuner(spec, trials, len(trials), resume, retry_failed)
+        grid = tuner.fit()
+        return _outcome(grid, trials)
+    finally:
+        if started:
+            import ray
+            ray.shutdown()
+
+
+def _outcome(grid: Any, trials: list[dict[str, Any]]) -> Outcome:
+    out = Outcome()
+    seen = set()
+    for result in grid:
+        trial = result.config['trial']
+        name = trial['name']
+        seen.add(name)
+        out.attempts[name] = _attempts(Path(trial['log']))
+        if result.metrics and result.metrics.get('complete'):
+            out.finished.append(name)
+        elif result.error is not None:
+            out.failed[name] = _error_text(result.error, Path(trial['log']))
+        else:
+            out.interrupted = True
+    if len(seen) < len(trials):
+        out.interrupted = True
+    return out
+
+
+def _attempts(log: Path) -> int:
+    try:
+        return log.read_text(errors='replace').count('\n# attempt at ')
+    except OSError:
+        return 0
+
+
+def _error_text(error: BaseException, log: Path) -> str:
+    text = str(error).strip().splitlines()
+    cause = next((line for line in reversed(text) if 'Error' in line), text[-1] if text else '')
+    return f'{cause.strip()}\n  log {log}, last lines:\n' + '\n'.join(
+        f'    {line}' for line in log_tail(log).splitlines())

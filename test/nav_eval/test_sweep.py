@@ -1,0 +1,222 @@
+"""The sweep on local Ray Tune, end to end: trials, evaluation, aggregation, resume, faults.
+
+Each sweep starts its own Ray (seconds) and trains tiny trials (200 steps, 2 + 2 evaluation
+scenarios), so one sweep is shared by the assertions that only read it.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+import yaml
+
+from nav_eval.sweep_report import SECTIONS
+from nav_eval.sweep_trial import train_command
+
+TINY = ['--total-timesteps', '200', '--set', 'learning_starts=100', '--set', 'checkpoint_freq=100',
+        '--set', 'buffer_size=500', '--set', 'max_episode_steps=12', '--train-seeds', '101-102',
+        '--heldout-seeds', '201-202', '--curve-seeds', '201', '--cpus-per-trial', '1']
+REPORT_FILES = ('Sweep.md', 'Sweep.html', 'results.json')
+
+
+def sweep(*args: str, timeout: float = 900) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, '-m', 'nav_eval.sweep', *args], capture_output=True,
+                          text=True, timeout=timeout)
+
+
+def explain(result: subprocess.CompletedProcess) -> str:
+    return result.stdout[-4000:] + result.stderr[-4000:]
+
+
+@pytest.fixture(scope='module')
+def finished(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess]:
+    storage = tmp_path_factory.mktemp('sweeps')
+    result = sweep('--seeds', '1-2', *TINY, '--storage', str(storage), '--name', 's')
+    return storage / 's', result
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    files = [folder / n for n in REPORT_FILES] + sorted((folder / 'figures').glob('*.png'))
+    return {p.name: p.read_bytes() for p in files}
+
+
+def test_a_two_seed_sweep_trains_evaluates_and_aggregates(finished):
+    folder, result = finished
+    assert result.returncode == 0, explain(result)
+    for seed in (1, 2):
+        run = folder / 'trials' / f'seed{seed}'
+        assert (run / 'final_model.zip').is_file()
+        assert yaml.safe_load((run / 'config.yaml').read_text())['seed'] == seed
+        assert not (run / 'checkpoints' / 'replay_buffer.pkl').exists()  # a finished trial
+        sets = json.loads((run / 'eval' / 'results.json').read_text())['sets']
+        assert {s['name']: s['seeds'] for s in sets} == {'dqn_train': [101, 102],
+                                                       'dqn_heldout': [201, 202]}
+        assert sorted(int(p.name) for p in (run / 'eval' / 'curve').iterdir()) == [100, 200]
+        assert re.search(rf'\] done  seed{seed} in \d+ s: held-out success \d+%', result.stdout)
+    baselines = json.loads((folder / 'baselines' / 'defaults.json').read_text())
+    assert [s['name'] for s in baselines['sets']] == ['random_train', 'random_heldout',
+                                                      'servo_train', 'servo_heldout']
+    assert 'ETA' in result.stdout and 'start seed1' in result.stdout
+    report = (folder / 'Sweep.md').read_text()
+    for heading in SECTIONS:
+        if heading != 'Probability of improvement':  # only with more than one configuration
+            assert f'## {heading}' in report, heading
+    assert '## Missing' not in report and '## Failed' not in report
+    html = (folder / 'Sweep.html').read_text()
+    assert 'src="figures/' not in html and html.count('data:image/png;base64,') == 4
+    results = json.loads((folder / 'results.json').read_text())
+    assert results['configurations'] == {'defaults': ['seed1', 'seed2']}
+    iqm = results['aggregates']['success_rate']['defaults']['IQM']
+    assert iqm['low'] <= iqm['point'] <= iqm['high']
+    assert {r['policy'] for r in results['banks']} == {'random', 'servo',
+                                                       'DQN final (all seeds pooled)'}
+
+
+def test_trials_ran_at_once_in_different_domains(finished):
+    folder, result = finished
+    assert result.returncode == 0, explain(result)
+    assert re.search(r'start seed\d \(1 running', result.stdout)  # the second joined the first
+    domains = {}
+    for seed in (1, 2):
+        log = (folder / 'logs' / f'seed{seed}.log').read_text()
+        domains[seed] = set(re.findall(r'ROS_DOMAIN_ID=(\d+)', log))
+    assert domains[1] and domains[2] and not domains[1] & domains[2]
+
+
+def test_aggregating_again_gives_identical_files_and_resume_runs_nothing(finished):
+    folder, result = finished
+    assert result.returncode == 0, explain(result)
+    before = snapshot(folder)
+    logs = {p.name: p.read_text() for p in (folder / 'logs').iterdir()}
+    again = sweep('--aggregate', str(folder), timeout=300)
+    assert again.returncode == 0, explain(again)
+    assert snapshot(folder) == before
+    resumed = sweep('--resume', str(folder), timeout=600)
+    assert resumed.returncode == 0, explain(resumed)
+    assert 'start ' not in resumed.stdout
+    assert {p.name: p.read_text() for p in (folder / 'logs').iterdir()} == logs
+    assert snapshot(folder) == before
+
+
+def test_aggregate_a_folder_of_runs_with_two_configurations(finished, tmp_path):
+    folder, result = finished
+    assert result.returncode == 0, explain(result)
+    for seed in (1, 2):
+        for label, turn_speed in (('a', None), ('b', 0.02)):
+            copy = tmp_path / f'{label}{seed}'
+            shutil.copytree(folder / 'trials' / f'seed{seed}', copy,
+                            ignore=shutil.ignore_patterns('checkpoints', 'tb', 'traces'))
+            if turn_speed is not None:
+                config = yaml.safe_load((copy / 'config.yaml').read_text())
+                config['turn_speed'] = turn_speed
+                (copy / 'config.yaml').write_text(yaml.safe_dump(config))
+    done = sweep('--aggregate', str(tmp_path), timeout=300)
+    assert done.returncode == 0, explain(done)
+    results = json.loads((tmp_path / 'results.json').read_text())
+    assert results['configurations'] == {'turn_speed=0.03': ['a1', 'a2'],
+                                         'turn_speed=0.02': ['b1', 'b2']}
+    report = (tmp_path / 'Sweep.md').read_text()
+    assert '## Probability of improvement' in report
+    assert set(results['improvement']) == {'turn_speed=0.03,turn_speed=0.02',
+                                           'turn_speed=0.02,turn_speed=0.03'}
+
+
+def test_bad_settings_are_one_line_errors(tmp_path):
+    for args, words in ((['--grid', 'nonsense=1,2'], 'unknown setting'),
+                        (['--grid', 'turn_speed='], 'bad setting'),
+                        (['--set', 'learning_rate=fast'], 'learning_rate')):
+        result = sweep(*args, '--storage', str(tmp_path), timeout=120)
+        assert result.returncode == 1 and words in result.stderr, explain(result)
+        assert 'Traceback' not in result.stderr and len(result.stderr.splitlines()) == 1
+
+
+def test_a_failing_trial_is_retried_then_reported(tmp_path):
+    result = sweep('--seeds', '1', *TINY, '--set', 'num_obstacles=9', '--no-baselines',
+                   '--storage', str(tmp_path), '--name', 'f', timeout=600)
+    assert result.returncode == 1, explain(result)
+    assert 'retry seed1' in result.stdout and 'FAILED seed1' in result.stdout
+    assert 'trial seed1 FAILED (tried 2 times)' in result.stdout
+    assert 'num_obstacles' in result.stdout  # the cause, from the tail of the trial's log
+    report = (tmp_path / 'f' / 'Sweep.md').read_text()
+    assert '## Failed trials' in report and 'num_obstacles' in report
+
+
+def descendants(pid: int) -> list[int]:
+    """Every process below ``pid`` (from /proc)."""
+    parents: dict[int, list[int]] = {}
+    for stat in Path('/proc').glob('[0-9]*/stat'):
+        try:
+            fields = stat.read_text().rsplit(')', 1)[1].split()
+        except OSError:
+            continue
+        parents.setdefault(int(fields[1]), []).append(int(stat.parent.name))
+    out, front = [], [pid]
+    while front:
+        front = [c for p in front for c in parents.get(p, [])]
+        out += front
+    return out
+
+
+def running(pid: int) -> bool:
+    try:
+        state = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != 'Z'
+
+
+def command_line(pid: int) -> str:
+    try:
+        return Path(f'/proc/{pid}/cmdline').read_bytes().replace(b'\0', b' ').decode()
+    except OSError:
+        return ''
+
+
+def test_ctrl_c_leaves_no_process_and_a_resumable_sweep(tmp_path):
+    args = [*TINY, '--total-timesteps', '50000', '--curve-seeds', '']
+    process = subprocess.Popen([sys.executable, '-m', 'nav_eval.sweep', '--seeds', '1-2', *args,
+                                '--no-baselines', '--storage', str(tmp_path), '--name', 'c'],
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    folder = tmp_path / 'c'
+    try:
+        deadline = time.monotonic() + 300
+        started = [folder / 'trials' / f'seed{s}' / 'checkpoints' / 'dqn_0_steps.zip'
+                   for s in (1, 2)]
+        while not all(p.is_file() for p in started):  # both trainers are training
+            assert process.poll() is None and time.monotonic() < deadline
+            time.sleep(0.5)
+        below = descendants(process.pid)
+        lines = [command_line(p) for p in below]
+        assert sum('nav_sim.sim_node' in c or 'sim_node' in c for c in lines) >= 2, lines
+        assert any('raylet' in c for c in lines) and sum('nav_gym.train' in c for c in lines) == 2
+        process.send_signal(signal.SIGINT)
+        output, _ = process.communicate(timeout=180)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.wait()
+    assert process.returncode == 130, output[-3000:]
+    assert f'visnav-sweep --resume {folder}' in output
+    deadline = time.monotonic() + 90  # the trainers save a checkpoint, then exit
+    while any(running(p) for p in below) and time.monotonic() < deadline:
+        time.sleep(0.5)
+    left = [f'{p}: {command_line(p)}' for p in below if running(p)]
+    for pid in below:  # clean up before asserting, so a failure leaves nothing behind
+        if running(pid):
+            os.kill(pid, signal.SIGKILL)
+    assert not left
+    spec = json.loads((folder / 'sweep.json').read_text())
+    for seed in (1, 2):
+        trial = {'run_dir': str(folder / 'trials' / f'seed{seed}'), 'gpus': 0,
+                 'config_file': '', 'seed': seed}
+        assert '--resume' in train_command(trial)  # continues from its newest checkpoint
+    assert spec['seeds'] == [1, 2]

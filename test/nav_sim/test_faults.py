@@ -1,0 +1,139 @@
+"""The sim node under faults and bad input, as a user meets them (issue 10, section 1).
+
+Each test starts real ``sim_node`` processes, as ``ros2 run`` does.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import time
+from pathlib import Path
+
+import pytest
+from rclpy.parameter_client import AsyncParameterClient
+
+from nav_sim.client import SimClient
+from nav_sim.errors import ScenarioError
+from nav_sim.sim_process import executable_command, ros_args
+
+CLOCK_TICK = os.sysconf('SC_CLK_TCK')
+
+
+def start(namespace: str, params: dict | None = None, params_file: Path | None = None
+          ) -> subprocess.Popen:
+    command = executable_command() + ros_args(namespace, params,
+                                              str(params_file) if params_file else None)
+    return subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+def interrupt(process: subprocess.Popen, timeout: float = 15.0) -> tuple[int, str]:
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+    try:
+        out, err = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        out, err = process.communicate()
+    return process.returncode, out + err
+
+
+def params_file(tmp_path: Path, body: str) -> Path:
+    path = tmp_path / 'sim.yaml'
+    path.write_text('/**:\n  ros__parameters:\n' + ''.join(f'    {line}\n'
+                                                          for line in body.splitlines()))
+    return path
+
+
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process so far (``/proc/PID/stat``)."""
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / CLOCK_TICK
+
+
+@pytest.mark.parametrize(('body', 'expected'), [
+    ('sim_dt: "fast"', "parameter sim_dt takes a number, got 'fast'"),
+    ('sim_dt: 1', 'parameter sim_dt takes a double: write 1.0, not 1'),
+    ('action_repeat: 3.7', 'parameter action_repeat takes an integer, got 3.7'),
+    ('mode: realtime\nrealtime_rate: 1.0e-12', 'realtime_rate must be in [5.56e-11, 5.12e+08]'),
+])
+def test_a_bad_params_file_is_one_line_and_exit_code_2(tmp_path, namespace, body, expected):
+    process = start(namespace, params_file=params_file(tmp_path, body))
+    try:
+        out, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            interrupt(process)
+    assert process.returncode == 2, out + err
+    assert 'Traceback' not in out + err
+    lines = out.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f'sim_node: invalid configuration: {expected}')
+
+
+def test_params_file_typos_are_named_and_the_rest_applies(tmp_path, namespace):
+    # sim_dtt: a typo, warned about; sim_dt: 1.0 applies (ctrl_dt = 16 x 1.0 s)
+    process = start(namespace, params_file=params_file(tmp_path, 'sim_dtt: 0.01\nsim_dt: 1.0'))
+    try:
+        with SimClient(namespace, timeout=15.0) as client:
+            client.wait_for_sim(60.0)
+            frame, _ = client.reset(seed=1)
+            after = client.step(0.0, 0.0, frame)
+            assert after.stamp_ns - frame.stamp_ns == 16 * 10**9  # 16 physics steps of 1 s
+    finally:
+        code, output = interrupt(process)
+    assert code == 0 and 'Traceback' not in output, output
+    assert "unknown parameter 'sim_dtt' ignored (did you mean sim_dt?)" in output
+    assert 'ctrl_dt=16.000 s (16 x 1.0 s)' in output
+
+
+def test_a_realtime_rate_no_timer_can_run_is_refused_and_the_node_lives(namespace):
+    process = start(namespace, {'mode': 'realtime', 'realtime_rate': 4.0})
+    try:
+        with SimClient(namespace, timeout=15.0) as client:
+            client.wait_for_sim(60.0)
+            for rate in (1.0e-12, 1.0e300):  # OverflowError / a 0 ns timer before
+                with pytest.raises(ScenarioError, match=r'realtime_rate must be in \[5.56e-11'):
+                    client.set_parameters(realtime_rate=rate)
+            client.set_parameters(realtime_rate=8)  # an int converts to the declared double
+            period = client._latest.period if client._latest else -1
+            assert client.spin_until(
+                lambda: client._latest is not None and client._latest.period >= period + 3,
+                10.0), 'the realtime sim stopped publishing'
+            assert process.poll() is None
+    finally:
+        code, output = interrupt(process)
+    assert code == 0 and 'Traceback' not in output, output
+
+
+def test_an_idle_lockstep_sim_sleeps_yet_answers_at_once(namespace):
+    process = start(namespace)
+    try:
+        with SimClient(namespace, timeout=15.0) as client:
+            client.wait_for_sim(60.0)
+        # no client: nothing to do for the sim
+        before, start_time = cpu_seconds(process.pid), time.monotonic()
+        deadline = start_time + 3.0
+        while time.monotonic() < deadline:
+            time.sleep(deadline - time.monotonic())
+        used = cpu_seconds(process.pid) - before
+        share = used / (time.monotonic() - start_time)
+        assert share < 0.05, f'an idle lockstep sim used {share:.1%} of a core (polling?)'
+        with SimClient(namespace, timeout=15.0) as client:
+            client.wait_for_sim(60.0)
+            start_time = time.monotonic()
+            client.set_parameters(seed=7)
+            parameters = AsyncParameterClient(client.node, 'sim_node')
+            future = parameters.get_parameters(['seed', 'split'])
+            assert client.spin_until(future.done, 10.0)
+            answered = time.monotonic() - start_time
+            values = [v.integer_value or v.string_value for v in future.result().values]
+            assert values == [7, 'train']
+            assert answered < 5.0, f'parameter set and get took {answered:.1f} s'
+        start_time = time.monotonic()
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=10.0)
+        assert time.monotonic() - start_time < 5.0
+    finally:
+        code, output = interrupt(process)
+    assert code == 0 and 'Traceback' not in output, output
