@@ -26,7 +26,6 @@ from pathlib import Path
 from typing import Any
 
 from rosbags.rosbag2 import Reader
-from rosbags.typesys import Stores, get_typestore
 
 from nav_sim import live_topics, ros_msgs
 
@@ -40,7 +39,7 @@ PERIOD_TOPICS = (IMAGE_TOPIC, 'camera/camera_info', 'odom', 'episode_event')
 SIM_TOPICS = (*PERIOD_TOPICS, 'goal_pose')
 
 #: ROS 2 Jazzy types plus the live view's visnav_msgs types (nav_sim.live_topics)
-TYPESTORE = live_topics.register_types(get_typestore(Stores.ROS2_JAZZY))
+TYPESTORE = live_topics.TYPESTORE  # Jazzy's types and visnav's own (one typestore)
 
 
 def cdr_stamp_ns(data: bytes | memoryview) -> int | None:

@@ -23,6 +23,7 @@ from nav_sim.errors import ConfigError
 _log = logging.getLogger(__name__)
 
 DEFAULT_PORT = LIVE_DEFAULT_PORT
+MAX_PATH_POINTS = 5000  # the robot marker's path keeps the newest this many poses
 #: the most messages per second (wall clock) a topic sends: a bare env runs a few hundred steps
 #: per second, a viewer cannot show more, and each message costs about 0.1 ms of CPU in the
 #: server's sending thread (``benchmarks/bench_live.py``).  A changed scene waits for its turn;
@@ -155,8 +156,14 @@ class EpisodeScene:
 
     def step(self, pose: tuple[float, float, float]) -> None:
         """Move the robot to ``pose`` and extend the path."""
-        self.pose = tuple(float(v) for v in pose)  # type: ignore[assignment]
-        self.path.append((self.pose[0], self.pose[1]))
+        moved = tuple(float(v) for v in pose)
+        if self.path and moved[:2] == self.path[-1]:
+            self.pose = moved  # type: ignore[assignment]
+            return  # a stopped robot (realtime mode after the episode's end) adds no points
+        self.pose = moved  # type: ignore[assignment]
+        self.path.append((moved[0], moved[1]))
+        if len(self.path) > MAX_PATH_POINTS:  # a realtime sim driven for hours
+            del self.path[:len(self.path) - MAX_PATH_POINTS]
 
     def scene(self, stamp_ns: int) -> Any:
         """Build the static world MarkerArray of the episode."""
