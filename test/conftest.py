@@ -5,8 +5,30 @@ from __future__ import annotations
 import os
 import sys
 
+import pytest
+
 # Must happen before rclpy is imported by any test module.
 os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 os.environ.setdefault('MUJOCO_GL', 'egl')
+
+
+@pytest.fixture(scope='session')
+def spaces_only() -> type:
+    """Return an env class with only the spaces of visnav/Navigation-v0 (a model, no sim)."""
+    import gymnasium as gym
+    import numpy as np
+
+    class SpacesOnly(gym.Env):
+        observation_space = gym.spaces.Box(0, 255, (3, 84, 84), np.uint8)
+        action_space = gym.spaces.Discrete(3)
+
+        def reset(self, *, seed=None, options=None):
+            super().reset(seed=seed)
+            return self.observation_space.sample(), {}
+
+        def step(self, action):
+            return self.observation_space.sample(), 0.0, False, False, {}
+
+    return SpacesOnly

@@ -10,7 +10,6 @@ import subprocess
 import sys
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -21,28 +20,14 @@ from nav_gym.train_config import TrainConfig
 SETS = ['random_train', 'dqn_heldout', 'early_train']
 
 
-class _Spaces(gym.Env):
-    """Only the spaces of visnav/Navigation-v0, to build a model without a sim."""
-
-    observation_space = gym.spaces.Box(0, 255, (3, 84, 84), np.uint8)
-    action_space = gym.spaces.Discrete(3)
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        return self.observation_space.sample(), {}
-
-    def step(self, action):
-        return self.observation_space.sample(), 0.0, False, False, {}
-
-
 @pytest.fixture(scope='module')
-def run_dir(tmp_path_factory) -> Path:
+def run_dir(tmp_path_factory, spaces_only) -> Path:
     """Make a run directory with a tiny model (two checkpoints) and a 15-step episode limit."""
     from stable_baselines3 import DQN
     path = tmp_path_factory.mktemp('run')
     config = TrainConfig(max_episode_steps=15)
     (path / 'config.yaml').write_text(config.to_yaml())
-    model = DQN('CnnPolicy', _Spaces(), buffer_size=64, learning_starts=16, batch_size=8,
+    model = DQN('CnnPolicy', spaces_only(), buffer_size=64, learning_starts=16, batch_size=8,
                 seed=3, device='cpu')
     (path / 'checkpoints').mkdir()
     model.learn(32)

@@ -173,15 +173,14 @@ def test_evaluate_video_flag_with_out_elsewhere_is_a_clear_error(tmp_path: Path)
     assert '--video reads the evaluation' in result.stderr
 
 
-def test_evaluate_writes_a_video_of_a_real_episode(tmp_path: Path) -> None:
+def test_evaluate_writes_a_video_of_a_real_episode(tmp_path: Path, spaces_only) -> None:
     """A tiny DQN through the real graph: the video has one frame per stored observation."""
     from stable_baselines3 import DQN
-    from test_evaluate import _Spaces
 
     from nav_gym.train_config import TrainConfig
     (tmp_path / 'config.yaml').write_text(TrainConfig(max_episode_steps=8).to_yaml())
-    model = DQN('CnnPolicy', _Spaces(), buffer_size=64, learning_starts=16, batch_size=8, seed=3,
-                device='cpu')
+    model = DQN('CnnPolicy', spaces_only(), buffer_size=64, learning_starts=16, batch_size=8,
+                seed=3, device='cpu')
     model.save(tmp_path / 'final_model.zip')
     result = subprocess.run([sys.executable, '-m', 'nav_eval.evaluate', str(tmp_path), '--sets',
                              'dqn_heldout', '--heldout-seeds', '201', '--no-record', '--video'],

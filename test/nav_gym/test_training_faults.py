@@ -15,8 +15,6 @@ import threading
 import time
 from pathlib import Path
 
-import gymnasium as gym
-import numpy as np
 import pytest
 
 from nav_gym import train
@@ -161,25 +159,13 @@ def test_a_killed_embedded_sim_saves_a_checkpoint_and_says_how_to_resume(tmp_pat
     assert temporary_files(run_dir) == []
 
 
-class _Spaces(gym.Env):
-    observation_space = gym.spaces.Box(0, 255, (3, 84, 84), np.uint8)
-    action_space = gym.spaces.Discrete(3)
-
-    def reset(self, *, seed=None, options=None):
-        super().reset(seed=seed)
-        return self.observation_space.sample(), {}
-
-    def step(self, action):
-        return self.observation_space.sample(), 0.0, False, False, {}
-
-
 def no_space(*args, **kwargs):
     raise OSError(errno.ENOSPC, 'No space left on device')
 
 
-def test_a_full_disk_is_a_one_line_error_and_leaves_no_temporary_file(tmp_path):
+def test_a_full_disk_is_a_one_line_error_and_leaves_no_temporary_file(tmp_path, spaces_only):
     from stable_baselines3 import DQN
-    model = DQN('CnnPolicy', _Spaces(), buffer_size=100, learning_starts=10, device='cpu')
+    model = DQN('CnnPolicy', spaces_only(), buffer_size=100, learning_starts=10, device='cpu')
     model.learn(20)
     folder = tmp_path / 'checkpoints'
     folder.mkdir()
