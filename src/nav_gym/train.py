@@ -277,8 +277,10 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, hint: str,
             path = _save(model, config, run_dir, summary, saved)
         except KeyboardInterrupt:
             summary['interrupted'] = True
+            found = checkpoints(run_dir)
+            newest = f' (step {found[-1][0]})' if found else ''
             state = ('the run is complete (final_model.zip, summary.json)' if saved else
-                     'the run resumes from its newest complete checkpoint')
+                     f'the run resumes from its newest complete checkpoint{newest}')
             print(f'\ninterrupted while saving at step {model.num_timesteps}: {state}; {hint}',
                   flush=True)
             return summary

@@ -54,11 +54,16 @@ class LiveClient:
         self.channels: dict[str, dict[str, Any]] = {}
         self._topics_by_subscription: dict[int, str] = {}
         self.pending: list[LiveMessage] = []
-        while not self.channels:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                raise TimeoutError(f'no channels advertised on port {port} within {timeout} s')
-            self._receive(left)
+        try:
+            while not self.channels:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    raise TimeoutError(f'no channels advertised on port {port} within '
+                                       f'{timeout} s')
+                self._receive(left)
+        except BaseException:
+            self.ws.close()  # nothing to watch: do not leak the connection
+            raise
 
     def subscribe(self, topics: list[str] | tuple[str, ...]) -> None:
         """Subscribe to the channels of ``topics`` (KeyError if one is not advertised)."""
