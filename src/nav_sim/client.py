@@ -30,6 +30,7 @@ from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
 from nav_sim import qos, ros_msgs, sim_graph
+from nav_sim.config import ros_integer_problem
 from nav_sim.errors import FrameSyncError, ScenarioError, SimConflictError, SimUnavailableError
 
 POLL_S = 0.25
@@ -349,9 +350,9 @@ def _parameter_msg(name: str, value: Any) -> ParameterMsg:
     if isinstance(value, bool):
         pv.type, pv.bool_value = ParameterType.PARAMETER_BOOL, value
     elif isinstance(value, (int, np.integer)):
-        if not -2**63 <= int(value) < 2**63:
-            raise ScenarioError(f'{name} must be in [-2**63, 2**63) (a ROS integer parameter), '
-                                f'got {value}')
+        problem = ros_integer_problem(name, int(value))
+        if problem:
+            raise ScenarioError(problem)
         pv.type, pv.integer_value = ParameterType.PARAMETER_INTEGER, int(value)
     elif isinstance(value, float):
         if not math.isfinite(value):

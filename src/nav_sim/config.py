@@ -74,6 +74,16 @@ def convert(name: str, kind: type, value: Any) -> Any:
     raise error
 
 
+def ros_integer_problem(name: str, value: int) -> str | None:
+    """Say why ``value`` cannot be the ROS integer parameter ``name`` (None if it can).
+
+    A ROS 2 integer parameter is a signed 64-bit integer.
+    """
+    if -2**63 <= value < 2**63:
+        return None
+    return f'{name} must be in [-2**63, 2**63) (a ROS integer parameter), got {value!r}'
+
+
 def _f(default: Any, help: str) -> Any:
     return field(default=default, metadata={'help': help})
 

@@ -10,7 +10,7 @@ import tempfile
 from collections.abc import Mapping
 from typing import Any
 
-from nav_sim.config import PARAMETER_TYPES, convert
+from nav_sim.config import PARAMETER_TYPES, convert, ros_integer_problem
 from nav_sim.errors import ConfigError
 from nav_sim.paths import package_prefix
 
@@ -34,10 +34,10 @@ def typed_params(params: Mapping[str, Any]) -> dict[str, Any]:
             out[key] = convert(key, PARAMETER_TYPES[key], value)
         except ConfigError as exc:
             raise ConfigError(f'sim_node parameter {exc}') from None
-        if isinstance(out[key], int) and not isinstance(out[key], bool) \
-                and not -2**63 <= out[key] < 2**63:
-            raise ConfigError(f'sim_node parameter {key} must be in [-2**63, 2**63) (a ROS '
-                              f'integer parameter), got {value!r}')
+        problem = (ros_integer_problem(key, out[key])
+                   if isinstance(out[key], int) and not isinstance(out[key], bool) else None)
+        if problem:
+            raise ConfigError(f'sim_node parameter {problem}')
     return out
 
 
