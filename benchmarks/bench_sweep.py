@@ -30,13 +30,20 @@ TRAIN = ['--checkpoint-freq', '1000000']  # no checkpoints but step 0 and the en
 AGGREGATION: list[float] = []
 
 
-def run(command: list[str], env: dict[str, str]) -> float:
-    """Run a command to completion; return its wall-clock seconds (raise if it fails)."""
+def run(command: list[str], env: dict[str, str], show: bool = False) -> float:
+    """Run a command to completion; return its wall-clock seconds (raise if it fails).
+
+    ``show``: print its progress lines (``[HH:MM:SS] ...``: the sweep's trial starts and ends).
+    """
     start = time.perf_counter()
     result = subprocess.run(command, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
                             text=True)
     if result.returncode != 0:
         raise SystemExit(f'{" ".join(command[:4])} failed:\n{result.stdout[-3000:]}')
+    if show:
+        for line in result.stdout.splitlines():
+            if line.startswith('['):
+                print(f'    {line}', flush=True)
     return time.perf_counter() - start
 
 
@@ -45,20 +52,27 @@ def plain(folder: Path, steps: int, seeds: list[int], env: dict[str, str]) -> fl
     total = 0.0
     for seed in seeds:
         name = f'seed{seed}'
-        total += run([sys.executable, '-m', 'nav_gym.train', '--total-timesteps', str(steps),
-                      '--seed', str(seed), '--runs-dir', str(folder), '--run-name', name,
-                      '--device', 'cpu', *TRAIN], env)
-        total += run([sys.executable, '-m', 'nav_eval.evaluate', str(folder / name), '--sets',
-                      'dqn_train,dqn_heldout', *EVAL, '--no-record'], env)
+        train = run([sys.executable, '-m', 'nav_gym.train', '--total-timesteps', str(steps),
+                     '--seed', str(seed), '--runs-dir', str(folder), '--run-name', name,
+                     '--device', 'cpu', *TRAIN], env)
+        evaluate = run([sys.executable, '-m', 'nav_eval.evaluate', str(folder / name), '--sets',
+                        'dqn_train,dqn_heldout', *EVAL, '--no-record'], env)
+        print(f'    {name}: train {train:.1f} s, evaluate {evaluate:.1f} s', flush=True)
+        total += train + evaluate
     return total
 
 
 def swept(folder: Path, steps: int, seeds: list[int], env: dict[str, str]) -> float:
     """Run the same trials as one sweep (Ray start to report)."""
-    seconds = run([sys.executable, '-m', 'nav_eval.sweep', '--seeds', ','.join(map(str, seeds)),
-                '--total-timesteps', str(steps), '--set', 'checkpoint_freq=1000000', *EVAL,
-                '--curve-seeds', '', '--no-baselines', '--cpus-per-trial',
-                str(os.cpu_count()), '--storage', str(folder), '--name', 'sweep'], env)
+    command = [sys.executable, '-m', 'nav_eval.sweep', '--seeds', ','.join(map(str, seeds)),
+               '--total-timesteps', str(steps), '--set', 'checkpoint_freq=1000000', *EVAL,
+               '--curve-seeds', '', '--no-baselines', '--cpus-per-trial', str(os.cpu_count()),
+               '--storage', str(folder), '--name', 'sweep']
+    seconds = run(command, env, show=True)
+    for log in sorted((folder / 'sweep' / 'logs').glob('*.log')):  # each stage under Ray
+        stages = [line.split(' after ')[-1] for line in log.read_text().splitlines()
+                  if line.startswith('# exit code')]
+        print(f"    {log.stem}: stages {', '.join(stages)}", flush=True)
     # the statistics alone, on the same trials (the plain commands compute none)
     AGGREGATION.append(run([sys.executable, '-m', 'nav_eval.sweep', '--aggregate',
                             str(folder / 'sweep')], env))

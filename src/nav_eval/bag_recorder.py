@@ -75,7 +75,7 @@ from nav_eval.bags import (
     cdr_stamp_ns,
 )
 from nav_eval.errors import RecordingError
-from nav_sim import qos
+from nav_sim import interface, qos
 
 _log = logging.getLogger(__name__)
 
@@ -101,14 +101,16 @@ class RecordedTopic:
 
 TOPICS = (
     RecordedTopic(IMAGE_TOPIC, 'sensor_msgs/msg/Image', Image, qos.OBSERVATION, True),
-    RecordedTopic('camera/camera_info', 'sensor_msgs/msg/CameraInfo', CameraInfo,
+    RecordedTopic(interface.CAMERA_INFO_TOPIC, 'sensor_msgs/msg/CameraInfo', CameraInfo,
                   qos.OBSERVATION, True),
-    RecordedTopic('odom', 'nav_msgs/msg/Odometry', Odometry, qos.OBSERVATION, True),
-    RecordedTopic('goal_pose', 'geometry_msgs/msg/PoseStamped', PoseStamped, qos.LATCHED, True),
-    RecordedTopic('episode_event', 'diagnostic_msgs/msg/DiagnosticArray', DiagnosticArray,
+    RecordedTopic(interface.ODOM_TOPIC, 'nav_msgs/msg/Odometry', Odometry, qos.OBSERVATION,
+                  True),
+    RecordedTopic(interface.GOAL_TOPIC, 'geometry_msgs/msg/PoseStamped', PoseStamped,
+                  qos.LATCHED, True),
+    RecordedTopic(interface.EVENT_TOPIC, 'diagnostic_msgs/msg/DiagnosticArray', DiagnosticArray,
                   qos.OBSERVATION, True),
-    RecordedTopic('cmd_vel', 'geometry_msgs/msg/Twist', Twist, qos.CONTROL, False),
-    RecordedTopic('/clock', 'rosgraph_msgs/msg/Clock', Clock, qos.CLOCK, True),
+    RecordedTopic(interface.CMD_VEL_TOPIC, 'geometry_msgs/msg/Twist', Twist, qos.CONTROL, False),
+    RecordedTopic(interface.CLOCK_TOPIC, 'rosgraph_msgs/msg/Clock', Clock, qos.CLOCK, True),
 )
 
 
@@ -338,7 +340,7 @@ class BagRecorder:
         publishes before then never reaches the bag.
         """
         ids = [self._ids[name] for name in self._known(topics)]
-        if self._ids['cmd_vel'] in ids:
+        if self._ids[interface.CMD_VEL_TOPIC] in ids:
             raise ValueError('cmd_vel has no stamp to wait for')
 
         def arrived() -> bool:

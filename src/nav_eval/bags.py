@@ -27,16 +27,17 @@ from typing import Any
 
 from rosbags.rosbag2 import Reader
 
-from nav_sim import live_topics, ros_msgs
+from nav_sim import interface, live_topics, ros_msgs
 
 BAG_VERSION = 9            # the rosbag2 metadata version ROS 2 Jazzy writes
-IMAGE_TOPIC = 'camera/image_raw'
+IMAGE_TOPIC = interface.IMAGE_TOPIC
 EPISODE_TOPIC = '/visnav/episode'
 STRING_TYPE = 'std_msgs/msg/String'
 #: what nav_sim publishes every control period (and ``/clock`` with ``publish_clock``)
-PERIOD_TOPICS = (IMAGE_TOPIC, 'camera/camera_info', 'odom', 'episode_event')
+PERIOD_TOPICS = (IMAGE_TOPIC, interface.CAMERA_INFO_TOPIC, interface.ODOM_TOPIC,
+                 interface.EVENT_TOPIC)
 #: topics every nav_sim node publishes
-SIM_TOPICS = (*PERIOD_TOPICS, 'goal_pose')
+SIM_TOPICS = (*PERIOD_TOPICS, interface.GOAL_TOPIC)
 
 #: ROS 2 Jazzy types plus the live view's visnav_msgs types (nav_sim.live_topics)
 TYPESTORE = live_topics.TYPESTORE  # Jazzy's types and visnav's own (one typestore)
@@ -84,7 +85,8 @@ def episode_events(path: str | Path) -> list[tuple[int, dict[str, Any]]]:
     ``goal``, ``collision``) plus ``topic`` and the counters (``episode``, ``seed``, ...).
     """
     with Reader(path) as reader:
-        topics = [c.topic for c in reader.connections if c.topic.endswith('/episode_event')]
+        topics = [c.topic for c in reader.connections
+                  if c.topic.endswith(f'/{interface.EVENT_TOPIC}')]
     events = []
     for topic, messages in read_bag(path, topics).items():
         for timestamp, msg in messages:

@@ -37,6 +37,7 @@ from nav_gym.errors import TrainConfigError
 from nav_gym.live_hooks import add_live_argument
 from nav_gym.timing import quiet_learner_threads
 from nav_gym.train_config import TrainConfig
+from nav_sim import interface
 from nav_sim.config import SimConfig, normalise_split
 
 TRAIN_SEEDS = tuple(range(101, 111))
@@ -241,10 +242,11 @@ def _open_recorder(path: Path, env: NavigationEnv, timeout: float = 10.0) -> Any
     # cmd_vel is the env's own publisher: it delivers to the recorder once it has matched the
     # recorder's subscription (the sim's subscription is the other one)
     commands = env.client.pub_cmd
-    if recorder.wait_for_publishers(timeout, (*SIM_TOPICS, 'cmd_vel')):
+    if recorder.wait_for_publishers(timeout, (*SIM_TOPICS, interface.CMD_VEL_TOPIC)):
         while time.monotonic() < deadline:
             frame, _ = env.client.reset(0, 'train')
-            if (recorder.wait_for(frame.stamp_ns, WARM_UP_WAIT_S, (*PERIOD_TOPICS, '/clock'))
+            if (recorder.wait_for(frame.stamp_ns, WARM_UP_WAIT_S,
+                                  (*PERIOD_TOPICS, interface.CLOCK_TOPIC))
                     and commands.get_subscription_count() >= 2):
                 recorder.start(frame.stamp_ns + 1)
                 return recorder

@@ -7,6 +7,12 @@ method, 95 %.  rliable draws its resamples from NumPy's *global* generator (its 
 argument does not reach ``np.random.choice``), so every call here seeds that generator with a
 fixed value and restores its previous state afterwards: the same scores always give the same
 intervals.
+
+The bootstrap calls the aggregate once per resample (10,000 times per estimate), and rliable's
+``aggregate_iqm`` goes through ``scipy.stats.trim_mean``, whose argument handling costs about
+0.2 ms a call: :func:`iqm` is the same 25 % trimmed mean over all scores in plain NumPy (equal
+to rliable's up to float rounding; ``test_stats`` checks it), which makes a sweep's
+statistics several times faster.
 """
 
 from __future__ import annotations
@@ -23,8 +29,27 @@ from rliable import metrics as rlm
 RANDOM_STATE = 2021
 REPS = 10_000
 CONFIDENCE = 0.95
+TRIM = 0.25  # the interquartile mean drops the lowest and highest quarter of the scores
+
+
+def iqm(scores: np.ndarray) -> float:
+    """Return the interquartile mean of all scores (rliable's ``aggregate_iqm``)."""
+    return float(iqm_columns(np.ravel(scores)[:, None])[0])
+
+
+def iqm_columns(scores: np.ndarray) -> np.ndarray:
+    """Return the interquartile mean of each column of a ``(scores, columns)`` matrix.
+
+    A column with a NaN is NaN (as ``scipy.stats.trim_mean``; sorting alone would trim it).
+    """
+    ordered = np.sort(scores, axis=0)
+    cut = int(TRIM * ordered.shape[0])  # scipy.stats.trim_mean's cut
+    out = ordered[cut:ordered.shape[0] - cut].mean(axis=0)
+    return np.where(np.isnan(scores).any(axis=0), np.nan, out)
+
+
 AGGREGATES: dict[str, Callable[[np.ndarray], float]] = {
-    'IQM': rlm.aggregate_iqm, 'mean': rlm.aggregate_mean,
+    'IQM': iqm, 'mean': rlm.aggregate_mean,
     'median': lambda x: float(np.median(x)), 'optimality gap': rlm.aggregate_optimality_gap}
 # For a rate where lower is better (collisions) the optimality gap is the gap to 0: that of
 # 1 - rate.  The other aggregates keep the rate's own scale.
@@ -69,7 +94,7 @@ def aggregate_estimates(scores: Mapping[str, np.ndarray], metric: str = 'success
 
     def aggregates(x: np.ndarray) -> np.ndarray:
         gap = rlm.aggregate_optimality_gap(1.0 - x if flip else x)
-        return np.array([rlm.aggregate_iqm(x), rlm.aggregate_mean(x), np.median(x), gap])
+        return np.array([iqm(x), rlm.aggregate_mean(x), np.median(x), gap])
 
     with seeded(seed):
         points, intervals = rly.get_interval_estimates(
@@ -96,7 +121,7 @@ def iqm_curve(scores: Mapping[str, np.ndarray], reps: int = REPS, seed: int = RA
     Returns rliable's point estimates (one per checkpoint) and intervals (``2 x checkpoints``).
     """
     def iqm_per_checkpoint(x: np.ndarray) -> np.ndarray:
-        return np.array([rlm.aggregate_iqm(x[..., i]) for i in range(x.shape[-1])])
+        return iqm_columns(x.reshape(-1, x.shape[-1]))
 
     with seeded(seed):
         return rly.get_interval_estimates(dict(scores), iqm_per_checkpoint, method='percentile',

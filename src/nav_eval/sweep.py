@@ -7,7 +7,7 @@
     ros2 run nav_eval sweep --aggregate DIR         # statistics of finished trials only
 
 A sweep directory holds ``sweep.json`` (its settings), ``configs/<config>.yaml`` (one training
-config per grid point), ``trials/<config>seed<n>/`` (one run directory per trial, exactly as
+config per grid point), ``trials/[<config>_]seed<n>/`` (one run directory per trial, exactly as
 ``nav-gym-train`` writes it, with its ``eval/``), ``baselines/<config>.json`` (random policy and
 servo on both banks), ``logs/<trial>.log`` (every command a trial ran and its output),
 ``tune/`` (Ray Tune's experiment state) and the aggregate: ``Sweep.md``, ``Sweep.html``,
@@ -40,6 +40,13 @@ from nav_sim.sim_process import typed_params
 SWEEP_FILE = 'sweep.json'
 FAILED_FILE = 'failed.json'  # trials that failed twice, with their error and log tail
 INTERRUPTED = 130
+#: how configurations and trials are named (saved in sweep.json; a sweep.json without it is
+#: version 1): 1: a sweep without a grid has the configuration ``defaults`` whatever its --set
+#: settings, and trial names carry the configuration unless it is ``defaults``; 2: a sweep
+#: without a grid names its configuration by its --set settings, and trial names carry the
+#: configuration only when there are several
+NAMING = 2
+MAX_NAME = 120  # a configuration name is a file name (configs/<name>.yaml): keep it short
 
 
 class SweepError(NavEvalError, ValueError):
@@ -61,15 +68,21 @@ class SweepSpec:
     record: bool = False
     cpus_per_trial: float = 2
     gpus_per_trial: float = 0
+    naming: int = 1  # NAMING of the code that created the sweep (older sweeps: 1)
 
     def configurations(self) -> list[tuple[str, dict[str, str]]]:
-        """Return (config name, overrides) for every grid point, in grid order."""
+        """Return (config name, overrides) for every grid point, in grid order.
+
+        A grid point is named by its grid values; a sweep without a grid has one configuration,
+        named by its ``--set`` settings (``defaults`` without any; see ``NAMING``).
+        """
         keys = list(self.grid)
         out = []
         for values in itertools.product(*(self.grid[k] for k in keys)):
             point = dict(zip(keys, values, strict=True))
-            name = '_'.join(f'{k}={v}' for k, v in point.items())
-            out.append((slug(name) if name else 'defaults', {**self.fixed, **point}))
+            named = point or (self.fixed if self.naming >= 2 else {})
+            name = slug('_'.join(f'{k}={v}' for k, v in named.items()))[:MAX_NAME]
+            out.append((name if named else 'defaults', {**self.fixed, **point}))
         return out
 
     def trials(self) -> list[dict[str, Any]]:
@@ -78,9 +91,11 @@ class SweepSpec:
         common = {'cpus': int(max(1, self.cpus_per_trial)), 'gpus': self.gpus_per_trial,
                   'train_seeds': self.train_seeds, 'heldout_seeds': self.heldout_seeds}
         out = []
-        for config_name, _ in self.configurations():
+        configurations = self.configurations()
+        for config_name, _ in configurations:
             config_file = str(root / 'configs' / f'{config_name}.yaml')
-            prefix = '' if config_name == 'defaults' else f'{config_name}_'
+            alone = len(configurations) == 1 if self.naming >= 2 else config_name == 'defaults'
+            prefix = '' if alone else f'{config_name}_'
             for seed in self.seeds:
                 name = f'{prefix}seed{seed}'
                 out.append({**common, 'kind': 'train', 'name': name, 'config': config_name,
@@ -189,7 +204,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
         raise SweepError('--cpus-per-trial must be >= 1 and --gpus-per-trial >= 0')
     spec = SweepSpec(str(sweep_dir), seeds['seeds'], grid, fixed, seeds['train_seeds'],
                      seeds['heldout_seeds'], curve, not args.no_baselines, args.record,
-                     args.cpus_per_trial, args.gpus_per_trial)
+                     args.cpus_per_trial, args.gpus_per_trial, NAMING)
     sweep_dir.mkdir(parents=True, exist_ok=True)
     write_configs(spec)
     data = dataclasses.asdict(spec)
@@ -201,6 +216,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
 def run_sweep(spec: SweepSpec, address: str | None, resume: bool,
               retry_failed: bool = False) -> int:
     """Run (or continue) the sweep's trials on Ray Tune; aggregate; return an exit code."""
+    from nav_eval.sweep_trial import trial_finished
     from nav_eval.sweep_tune import run_trials
     trials = spec.trials()
     print(f'sweep {spec.sweep_dir}: {len(trials)} trials ({len(spec.configurations())} '
@@ -208,8 +224,11 @@ def run_sweep(spec: SweepSpec, address: str | None, resume: bool,
           f"{' + baselines' if spec.baselines else ''}), {spec.cpus_per_trial:g} CPU"
           f"{f' + {spec.gpus_per_trial:g} GPU' if spec.gpus_per_trial else ''} per trial",
           flush=True)
-    outcome = run_trials(spec, trials, address, resume, retry_failed)
     failures = Path(spec.sweep_dir) / FAILED_FILE
+    done = {t['name'] for t in trials if trial_finished(t)}
+    if resume and not retry_failed:  # failed for good in an earlier session: not run again
+        done |= set(_read_failures(failures))
+    outcome = run_trials(spec, trials, address, resume, retry_failed, done)
     if outcome.failed:
         failures.write_text(json.dumps(outcome.failed, indent=1, sort_keys=True) + '\n')
     else:
@@ -223,6 +242,14 @@ def run_sweep(spec: SweepSpec, address: str | None, resume: bool,
         return INTERRUPTED
     aggregate(Path(spec.sweep_dir))
     return 1 if outcome.failed else 0
+
+
+def _read_failures(path: Path) -> dict[str, str]:
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
 
 
 def aggregate(folder: Path) -> Path:

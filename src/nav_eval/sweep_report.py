@@ -2,7 +2,8 @@
 
 Reads only files (no ROS, no Ray): each trial is a run directory as ``nav-gym-train`` writes it
 with its ``eval/results.json`` (final model on the training and held-out seeds) and
-``eval/curve/<steps>/results.json`` (held-out success per checkpoint); baselines are
+``eval/curve/<steps>/results.json`` (held-out success per checkpoint) and, where they were
+kept, the held-out episodes' traces (the failure anatomy, :mod:`nav_eval.anatomy`); baselines are
 ``baselines/<config>.json``.  Trials with the same training settings (all but the seed and
 bookkeeping such as the run name) form one configuration.  The same trials aggregated twice give
 identical files (fixed bootstrap seed, PNGs without a software/date stamp).
@@ -16,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from nav_eval import stats
+from nav_eval import anatomy, stats
 from nav_eval.report_format import pct, table, to_html
 from nav_eval.sweep_figures import write_figures
 from nav_gym import run_dir as layout
@@ -29,9 +30,10 @@ FIGURES = (('intervals', 'Interval estimates per configuration: success'),
            ('intervals_collision', 'Interval estimates per configuration: collisions'),
            ('profile', 'Performance profile of held-out success'),
            ('curve', 'Sample efficiency'), ('improvement', 'Probability of improvement'))
+ANATOMY = 'Failure anatomy (held-out)'
 #: every section heading of Sweep.md (probability of improvement only with > 1 configuration)
 SECTIONS = ('Configurations: held-out success and collisions', *(c for _, c in FIGURES),
-            'Per seed', 'Bank difficulty')
+            'Per seed', ANATOMY, 'Bank difficulty')
 RATES = ('success_rate', 'collision_rate', 'timeout_rate', 'mean_spl')
 
 
@@ -62,9 +64,13 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
             curve[int(path.parent.name)] = {'success_rate': s['summary']['success_rate'],
                                             'seeds': s['seeds']}
     summary = _read_json(run_dir / layout.SUMMARY) or {}
+    heldout = final.get('heldout')
+    episodes = (anatomy.set_anatomy(run_dir / layout.EVAL, FINAL_SETS['heldout'],
+                                    heldout['seeds']) if heldout else [])
     key = {k: v for k, v in vars(config).items() if k not in BOOKKEEPING}
     return {'name': run_dir.name, 'run_dir': run_dir, 'seed': config.seed, 'settings': key,
-            'final': final, 'curve': curve, 'finished': (run_dir / layout.FINAL_MODEL).is_file(),
+            'final': final, 'curve': curve, 'anatomy': episodes,
+            'finished': (run_dir / layout.FINAL_MODEL).is_file(),
             'wall_clock_s': summary.get('wall_clock_total_s'),
             'steps': summary.get('num_timesteps')}
 
@@ -119,6 +125,20 @@ def per_seed_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
                     row[f'{split}_{rate}'] = entry['summary'][rate]
                 row[f'{split}_episodes'] = entry['summary']['episodes']
             rows.append(row)
+    return rows
+
+
+def anatomy_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
+    """Return the held-out failure anatomy per configuration and seed, then pooled ('all')."""
+    rows = []
+    for config, members in groups.items():
+        pooled = [e for t in members for e in t['anatomy']]
+        if not pooled:
+            continue
+        pools = [(t['seed'], t['anatomy']) for t in members if t['anatomy']]
+        for seed, episodes in pools + ([('all', pooled)] if len(pools) > 1 else []):
+            for outcome, figures in anatomy.summarise(episodes).items():
+                rows.append({'config': config, 'seed': seed, 'outcome': outcome, **figures})
     return rows
 
 
@@ -211,6 +231,7 @@ def _markdown(folder: Path, data: dict[str, Any], figures: dict[str, str]) -> st
             row += ['–' if r.get(f'{split}_mean_spl') is None else f"{r[f'{split}_mean_spl']:.3f}"]
         rows.append(row)
     lines += table(head, rows)
+    lines += _anatomy_markdown(data['anatomy'])
     lines += ['## Bank difficulty', '',
               'Success on the training bank and the held-out bank, each with its CI over '
               'scenarios: the random policy, the image-only servo (`nav_eval.policies.'
@@ -228,6 +249,29 @@ def _markdown(folder: Path, data: dict[str, Any], figures: dict[str, str]) -> st
     if data['missing']:
         lines += ['## Missing', ''] + [f'- {m}' for m in data['missing']] + ['']
     return '\n'.join(lines)
+
+
+def _anatomy_markdown(rows: list[dict[str, Any]]) -> list[str]:
+    lines = [f'## {ANATOMY}', '']
+    if not rows:
+        return lines + ['No held-out traces were kept (`eval/traces/dqn_heldout`).', '']
+    lines += ['How the held-out episodes spent their decisions, by outcome: *finding* the goal '
+              '(decisions before it was first in view; episodes that never saw it) and '
+              '*reaching* it (the share of decisions taken with the goal in view, how many of '
+              'those drove forward, left/right reversals per 100 decisions). A time-out that '
+              'saw the goal late failed to search; one that saw it most of the time and '
+              'reversed failed to approach (`nav_eval.anatomy`).', '']
+
+    def number(value: Any, digits: int = 0) -> str:
+        return '–' if value is None else f'{value:.{digits}f}'
+
+    body = [[r['config'], r['seed'], r['outcome'], r['episodes'],
+             number(r['median_first_in_view'], 1), r['never_in_view'], pct(r['in_view_share']),
+             pct(r['forward_in_view']), number(r['reversals_per_100'])] for r in rows]
+    lines += table(['Configuration', 'Seed', 'Outcome', 'Episodes', 'Decisions before in view '
+                    '(median)', 'Never in view', 'Goal in view', 'Forward when in view',
+                    'Reversals / 100'], body)
+    return lines
 
 
 def _jsonable(value: Any) -> Any:
@@ -266,7 +310,8 @@ def write_sweep_report(folder: Path) -> Path:
         'aggregates': configuration_stats(groups), 'banks': banks,
         'bank_verdict': stats.bank_verdict([r for r in banks]), 'missing': missing,
         'failed': _read_json(folder / 'failed.json') or {},
-        'settings': {c: m[0]['settings'] for c, m in groups.items()}}
+        'settings': {c: m[0]['settings'] for c, m in groups.items()},
+        'anatomy': anatomy_rows(groups)}
     curves = curve_scores(groups)
     success = {c: stats.score_matrix([t['final']['heldout']['summary']['success_rate']
                                       for t in m if 'heldout' in t['final']])

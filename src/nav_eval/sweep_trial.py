@@ -154,6 +154,14 @@ def baseline_command(trial: dict[str, Any]) -> list[str] | None:
             '--heldout-seeds', seed_text(trial['heldout_seeds']), '--out', str(out)]
 
 
+def trial_finished(trial: dict[str, Any]) -> bool:
+    """Tell whether every stage of a trial has its output (nothing would run)."""
+    if trial['kind'] == 'baseline':
+        return baseline_command(trial) is None
+    return ((Path(trial['run_dir']) / layout.FINAL_MODEL).is_file()
+            and not missing_evaluations(trial))
+
+
 def seed_text(seeds: list[int]) -> str:
     """Write seeds as evaluate parses them: '101-200' when contiguous, else a comma list."""
     if seeds and seeds == list(range(seeds[0], seeds[0] + len(seeds))):

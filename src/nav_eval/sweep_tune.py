@@ -12,6 +12,8 @@ from __future__ import annotations
 import logging
 import os
 import time
+from collections import Counter
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -50,19 +52,36 @@ def _percent(value: Any) -> str:
 class ProgressLines(tune.Callback):
     """Print one line per trial start, retry, failure and end, with figures and the ETA."""
 
-    def __init__(self, total: int) -> None:
-        """Follow ``total`` trials."""
-        self.total = total
+    def __init__(self, trials: list[dict[str, Any]], done: set[str] | frozenset = frozenset(),
+                 ) -> None:
+        """Follow ``trials`` (the trial dicts; their ``kind`` sets the ETA's durations).
+
+        ``done``: names of trials that ended before (a resumed sweep's finished trials, and its
+        failed ones when they are not run again); they count as done, once.
+        """
+        self.total = len(trials)
+        self.ended_names = {t['name'] for t in trials} & set(done)
+        todo = [t for t in trials if t['name'] not in self.ended_names]
+        self.remaining = Counter(t['kind'] for t in todo)
         self.start = time.monotonic()
         self.started: dict[str, float] = {}
-        self.durations: list[float] = []
+        self.durations: dict[str, list[float]] = {}
         self.results: dict[str, dict[str, Any]] = {}
-        self.ended = 0
+        self.ended = self.total - len(todo)
         self.parallel = 1
 
     def _line(self, text: str) -> None:
         elapsed = time.strftime('%H:%M:%S', time.gmtime(time.monotonic() - self.start))
         print(f'[{elapsed}] {text}', flush=True)
+
+    def _first_end(self, trial: Any) -> bool:
+        """Count a trial's end once; False for a trial that had ended before this session."""
+        name = _name(trial)
+        if name in self.ended_names:
+            return False
+        self.ended_names.add(name)
+        self.ended += 1
+        return True
 
     def on_trial_start(self, iteration: int, trials: list, trial: Any, **info: Any) -> None:
         """Print that a trial (re)started."""
@@ -83,17 +102,20 @@ class ProgressLines(tune.Callback):
 
     def on_trial_error(self, iteration: int, trials: list, trial: Any, **info: Any) -> None:
         """Print that a trial failed for good."""
-        self.ended += 1
+        if self._first_end(trial):
+            self.remaining[trial.config['trial']['kind']] -= 1
         self._line(f'FAILED {_name(trial)} ({self.ended} of {self.total} done)')
 
     def on_trial_complete(self, iteration: int, trials: list, trial: Any, **info: Any) -> None:
         """Print a finished trial's headline figures and the sweep's ETA."""
         name = _name(trial)
-        self.ended += 1
         took = time.monotonic() - self.started.get(name, self.start)
-        self.durations.append(took)
+        kind = trial.config['trial']['kind']
+        if self._first_end(trial):  # a trial done before re-runs nothing: not a duration
+            self.durations.setdefault(kind, []).append(took)
+            self.remaining[kind] -= 1
         r = self.results.get(name, {})
-        if trial.config['trial']['kind'] == 'baseline':
+        if kind == 'baseline':
             figures = (f"random {_percent(r.get('random_train_success'))} / "
                        f"{_percent(r.get('random_heldout_success'))}, servo "
                        f"{_percent(r.get('servo_train_success'))} / "
@@ -102,16 +124,31 @@ class ProgressLines(tune.Callback):
             figures = (f"held-out success {_percent(r.get('heldout_success'))} (collisions "
                        f"{_percent(r.get('heldout_collision'))}), training "
                        f"{_percent(r.get('train_success'))}")
-        eta = eta_text(self.durations, self.total - self.ended, self.parallel)
+        eta = eta_text(self.durations, self.remaining, self.parallel)
         self._line(f'done  {name} in {took:.0f} s: {figures}; {self.ended} of {self.total} '
                    f'done, ETA {eta}')
 
 
-def eta_text(durations: list[float], remaining: int, parallel: int) -> str:
-    """Estimate the time left from finished trials' durations (mean x remaining waves)."""
-    if not durations or remaining <= 0:
-        return '–' if remaining else '0 s'
-    seconds = sum(durations) / len(durations) * -(-remaining // max(1, parallel))
+def eta_text(durations: Mapping[str, list[float]], remaining: Mapping[str, int],
+             parallel: int) -> str:
+    """Estimate the time left: the remaining trials of each kind, in waves of ``parallel``.
+
+    A training trial takes minutes to hours and a baseline trial seconds to minutes, so each
+    kind is timed on its own: ``ceil(remaining / parallel)`` waves of its mean duration (a kind
+    with no finished trial yet takes the mean of all).
+    """
+    left = {kind: n for kind, n in remaining.items() if n > 0}
+    if not left:
+        return '0 s'
+    finished = [d for kind in durations for d in durations[kind]]
+    if not finished:
+        return '–'
+
+    def mean(values: list[float]) -> float:
+        return sum(values) / len(values)
+
+    seconds = sum(-(-n // max(1, parallel)) * mean(durations.get(kind) or finished)
+                  for kind, n in left.items())
     return time.strftime('%H:%M:%S', time.gmtime(seconds)) if seconds < 86_400 else \
         f'{seconds / 3600:.0f} h'
 
@@ -141,11 +178,11 @@ def start_ray(address: str | None) -> bool:
     return True
 
 
-def _tuner(spec: Any, trials: list[dict[str, Any]], total: int, resume: bool,
-           retry_failed: bool) -> tuple[Any, ProgressLines]:
+def _tuner(spec: Any, trials: list[dict[str, Any]], resume: bool, retry_failed: bool,
+           done: set[str] | frozenset) -> tuple[Any, ProgressLines]:
     resources = {'cpu': spec.cpus_per_trial, 'gpu': spec.gpus_per_trial}
     fn = tune.with_resources(trainable, resources)
-    progress = ProgressLines(total)
+    progress = ProgressLines(trials, done)
     path = str(Path(spec.sweep_dir) / TUNE_DIR)
     if resume and tune.Tuner.can_restore(path):
         tuner = tune.Tuner.restore(path, fn, resume_unfinished=True, resume_errored=False,
@@ -172,11 +209,14 @@ def _dirname(trial: Any) -> str:
 
 
 def run_trials(spec: Any, trials: list[dict[str, Any]], address: str | None, resume: bool,
-               retry_failed: bool = False) -> Outcome:
-    """Run the trials on Ray Tune and return which finished, failed or were interrupted."""
+               retry_failed: bool = False, done: set[str] | frozenset = frozenset()) -> Outcome:
+    """Run the trials on Ray Tune and return which finished, failed or were interrupted.
+
+    ``done``: the trials that ended in an earlier session (for the progress lines).
+    """
     started = start_ray(address)
     try:
-        tuner, _ = _tuner(spec, trials, len(trials), resume, retry_failed)
+        tuner, _ = _tuner(spec, trials, resume, retry_failed, done)
         grid = tuner.fit()
         return _outcome(grid, trials)
     finally:

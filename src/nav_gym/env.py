@@ -21,6 +21,7 @@ from nav_gym.actions import ACTION_NAMES
 from nav_gym.config import EnvConfig
 from nav_gym.errors import InvalidActionError, ResetNeededError
 from nav_gym.observation import OBS_SHAPE, image_msg_to_observation
+from nav_sim import interface
 from nav_sim.client import Frame, SimClient
 from nav_sim.config import normalise_split, validate_seed
 from nav_sim.errors import FrameSyncError, SimConflictError, SimUnavailableError
@@ -244,7 +245,7 @@ class NavigationEnv(gym.Env):
         from diagnostic_msgs.msg import DiagnosticArray
         node = self.client.node
         self._pub_diagnostics = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self._sim_status = f'{node.resolve_topic_name("sim_node")}: control period'
+        self._sim_status = f'{node.resolve_topic_name(interface.NODE_NAME)}: control period'
         self._sim_sums: dict[str, float] = {}
         node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
 

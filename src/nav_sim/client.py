@@ -29,7 +29,7 @@ from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
-from nav_sim import qos, ros_msgs, sim_graph
+from nav_sim import interface, qos, ros_msgs, sim_graph
 from nav_sim.config import ros_integer_problem
 from nav_sim.errors import FrameSyncError, ScenarioError, SimConflictError, SimUnavailableError
 
@@ -78,20 +78,20 @@ class SimClient:
         self.goal: tuple[float, float] | None = None
         n = self.node
         self._subs = [
-            n.create_subscription(Image, 'camera/image_raw', self._part('image'),
+            n.create_subscription(Image, interface.IMAGE_TOPIC, self._part('image'),
                                   qos.OBSERVATION),
-            n.create_subscription(DiagnosticArray, 'episode_event', self._part('event'),
+            n.create_subscription(DiagnosticArray, interface.EVENT_TOPIC, self._part('event'),
                                   qos.OBSERVATION),
         ]
         # The lockstep hot path waits on these two subscriptions directly, as
         # rclpy.wait_for_message does: the executor's per-wait bookkeeping costs more than the
         # sim's whole control period.  Services and the latched goal go through the executor.
         self._wait_set = _rclpy.WaitSet(len(self._subs), 0, 0, 0, 0, 0, self.context.handle)
-        n.create_subscription(PoseStamped, 'goal_pose', self._on_goal, qos.LATCHED)
-        self.pub_cmd = n.create_publisher(Twist, 'cmd_vel', qos.CONTROL)
-        self.cli_reset = n.create_client(Trigger, 'reset')
-        self.cli_stop = n.create_client(Trigger, 'stop')
-        self.cli_params = n.create_client(SetParameters, 'sim_node/set_parameters')
+        n.create_subscription(PoseStamped, interface.GOAL_TOPIC, self._on_goal, qos.LATCHED)
+        self.pub_cmd = n.create_publisher(Twist, interface.CMD_VEL_TOPIC, qos.CONTROL)
+        self.cli_reset = n.create_client(Trigger, interface.RESET_SERVICE)
+        self.cli_stop = n.create_client(Trigger, interface.STOP_SERVICE)
+        self.cli_params = n.create_client(SetParameters, interface.PARAMETERS_SERVICE)
         self._executor = SingleThreadedExecutor(context=self.context)
         self._executor.add_node(n)
 
@@ -123,7 +123,7 @@ class SimClient:
 
     def sim_present(self) -> bool:
         """Tell whether some node publishes the camera topic of this namespace."""
-        return self.node.count_publishers(self.node.resolve_topic_name('camera/image_raw')) > 0
+        return self.node.count_publishers(self.node.resolve_topic_name(interface.IMAGE_TOPIC)) > 0
 
     def sim_nodes(self) -> list[str]:
         """Name the nodes that publish this namespace's camera or serve its ``reset``."""

@@ -28,8 +28,10 @@ from typing import Any
 import numpy as np
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-CAMERA_TOPIC = '/camera/image_raw'
-EVENT_TOPIC = '/episode_event'
+from nav_sim import interface
+
+CAMERA_TOPIC = f'/{interface.IMAGE_TOPIC}'  # the sim's topics in the default namespace
+EVENT_TOPIC = f'/{interface.EVENT_TOPIC}'
 DIAGNOSTICS_TOPIC = '/diagnostics'
 SCENE_TOPIC = '/visnav/scene'
 ROBOT_TOPIC = '/visnav/robot'

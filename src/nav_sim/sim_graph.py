@@ -10,8 +10,8 @@ from __future__ import annotations
 
 from rclpy.node import Node
 
-CAMERA_TOPIC = 'camera/image_raw'
-RESET_SERVICE = 'reset'
+from nav_sim.interface import IMAGE_TOPIC, RESET_SERVICE
+
 #: how a refusal for this reason begins (a reset response message, an exception message)
 CONFLICT = 'several sims in one namespace'
 UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'  # what the graph reports before a node's name is known
@@ -19,7 +19,7 @@ UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'  # what the graph reports before a node's n
 
 def sim_count(node: Node) -> int:
     """Count the camera publishers and reset servers in ``node``'s namespace (the larger)."""
-    return max(node.count_publishers(node.resolve_topic_name(CAMERA_TOPIC)),
+    return max(node.count_publishers(node.resolve_topic_name(IMAGE_TOPIC)),
                node.count_services(node.resolve_service_name(RESET_SERVICE)))
 
 
@@ -28,7 +28,7 @@ def sim_nodes(node: Node) -> list[str]:
 
     One entry per publisher: two sims started under the same node name appear twice.
     """
-    camera = node.resolve_topic_name(CAMERA_TOPIC)
+    camera = node.resolve_topic_name(IMAGE_TOPIC)
     names = [_full_name(info.node_namespace, info.node_name)
              for info in node.get_publishers_info_by_topic(camera)]
     reset = node.resolve_service_name(RESET_SERVICE)
@@ -48,7 +48,7 @@ def conflict_message(node: Node, names: list[str]) -> str:
     """Say that several sims share ``node``'s namespace, naming them, and what to do."""
     count = max(sim_count(node), len(names))
     return (f"{CONFLICT}: {count} nodes in namespace '{node.get_namespace()}' publish "
-            f"{CAMERA_TOPIC} or serve {RESET_SERVICE} ({', '.join(names)}); their worlds would "
+            f"{IMAGE_TOPIC} or serve {RESET_SERVICE} ({', '.join(names)}); their worlds would "
             'mix: stop all but one sim, or give each its own namespace '
             '(`--ros-args -r __ns:=/NAME`)')
 

@@ -30,7 +30,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 from std_srvs.srv import Trigger
 
-from nav_sim import qos, ros_msgs, sim_graph
+from nav_sim import interface, qos, ros_msgs, sim_graph
 from nav_sim.config import (
     PARAMETER_TYPES,
     NodeConfig,
@@ -58,7 +58,7 @@ class SimNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         """Declare the parameters, load the world and create the topics and services."""
-        super().__init__('sim_node', **kwargs)
+        super().__init__(interface.NODE_NAME, **kwargs)
         sim_values = self._declare(SimConfig, read_only=True)
         node_values = self._declare(NodeConfig, read_only=False)
         self._warn_unknown_overrides()
@@ -129,12 +129,14 @@ class SimNode(Node):
                                    'of nav_sim are listed in config/sim.yaml')
 
     def _create_interfaces(self) -> None:
-        self.pub_image = self.create_publisher(Image, 'camera/image_raw', qos.OBSERVATION)
-        self.pub_info = self.create_publisher(CameraInfo, 'camera/camera_info', qos.OBSERVATION)
-        self.pub_odom = self.create_publisher(Odometry, 'odom', qos.OBSERVATION)
-        self.pub_event = self.create_publisher(DiagnosticArray, 'episode_event', qos.OBSERVATION)
-        self.pub_goal = self.create_publisher(PoseStamped, 'goal_pose', qos.LATCHED)
-        self.pub_clock = (self.create_publisher(Clock, '/clock', qos.CLOCK)
+        self.pub_image = self.create_publisher(Image, interface.IMAGE_TOPIC, qos.OBSERVATION)
+        self.pub_info = self.create_publisher(CameraInfo, interface.CAMERA_INFO_TOPIC,
+                                              qos.OBSERVATION)
+        self.pub_odom = self.create_publisher(Odometry, interface.ODOM_TOPIC, qos.OBSERVATION)
+        self.pub_event = self.create_publisher(DiagnosticArray, interface.EVENT_TOPIC,
+                                               qos.OBSERVATION)
+        self.pub_goal = self.create_publisher(PoseStamped, interface.GOAL_TOPIC, qos.LATCHED)
+        self.pub_clock = (self.create_publisher(Clock, interface.CLOCK_TOPIC, qos.CLOCK)
                           if self.settings.publish_clock else None)
         cfg = self.sim.config
         self._camera_info = ros_msgs.camera_info_msg(
@@ -142,9 +144,10 @@ class SimNode(Node):
             self.settings.camera_frame)
         # /diagnostics as diagnostic_updater publishes it: absolute, reliable, depth 10
         self.pub_diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.sub_cmd = self.create_subscription(Twist, 'cmd_vel', self._on_cmd_vel, qos.CONTROL)
-        self.create_service(Trigger, 'reset', self._on_reset)
-        self.create_service(Trigger, 'stop', self._on_stop)
+        self.sub_cmd = self.create_subscription(Twist, interface.CMD_VEL_TOPIC, self._on_cmd_vel,
+                                                 qos.CONTROL)
+        self.create_service(Trigger, interface.RESET_SERVICE, self._on_reset)
+        self.create_service(Trigger, interface.STOP_SERVICE, self._on_stop)
 
     # --- parameters -----------------------------------------------------------------------
     def _convert_parameters(self, params: list[Parameter]) -> list[Parameter]:

@@ -21,6 +21,19 @@ def test_iqm_of_known_values():
     assert est['optimality gap']['point'] == pytest.approx(1 - est['mean']['point'])
 
 
+@pytest.mark.parametrize('runs', [1, 2, 3, 4, 5, 7, 10, 101])
+def test_iqm_is_rliables_iqm(runs):
+    from rliable import metrics
+    rng = np.random.default_rng(runs)
+    scores = rng.uniform(0.0, 1.0, size=(runs, 3))
+    assert stats.iqm(scores) == pytest.approx(metrics.aggregate_iqm(scores), abs=1e-12)
+    curve = rng.uniform(0.0, 1.0, size=(runs, 1, 4))  # runs x tasks x checkpoints
+    expected = [metrics.aggregate_iqm(curve[..., i]) for i in range(4)]
+    assert stats.iqm_columns(curve.reshape(-1, 4)) == pytest.approx(expected, abs=1e-12)
+    scores[0, 0] = np.nan  # rliable (scipy) passes a NaN through instead of trimming it
+    assert np.isnan(stats.iqm(scores)) and np.isnan(metrics.aggregate_iqm(scores))
+
+
 def test_collision_optimality_gap_is_the_gap_to_zero():
     est = stats.aggregate_estimates({'a': stats.score_matrix([0.0, 0.1, 0.2])},
                                     'collision_rate', reps=REPS)['a']

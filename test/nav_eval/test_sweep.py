@@ -26,6 +26,9 @@ TINY = ['--total-timesteps', '200', '--set', 'learning_starts=100', '--set', 'ch
         '--set', 'buffer_size=500', '--set', 'max_episode_steps=12', '--train-seeds', '101-102',
         '--heldout-seeds', '201-202', '--curve-seeds', '201', '--cpus-per-trial', '1']
 REPORT_FILES = ('Sweep.md', 'Sweep.html', 'results.json')
+# one configuration, named by its --set settings (trials keep the plain names seed1, seed2)
+CONFIG = ('learning_starts=100_checkpoint_freq=100_buffer_size=500_max_episode_steps=12_'
+          'total_timesteps=200')
 
 
 def sweep(*args: str, timeout: float = 900) -> subprocess.CompletedProcess:
@@ -62,7 +65,7 @@ def test_a_two_seed_sweep_trains_evaluates_and_aggregates(finished):
                                                        'dqn_heldout': [201, 202]}
         assert sorted(int(p.name) for p in (run / 'eval' / 'curve').iterdir()) == [100, 200]
         assert re.search(rf'\] done  seed{seed} in \d+ s: held-out success \d+%', result.stdout)
-    baselines = json.loads((folder / 'baselines' / 'defaults.json').read_text())
+    baselines = json.loads((folder / 'baselines' / f'{CONFIG}.json').read_text())
     assert [s['name'] for s in baselines['sets']] == ['random_train', 'random_heldout',
                                                       'servo_train', 'servo_heldout']
     assert 'ETA' in result.stdout and 'start seed1' in result.stdout
@@ -74,8 +77,10 @@ def test_a_two_seed_sweep_trains_evaluates_and_aggregates(finished):
     html = (folder / 'Sweep.html').read_text()
     assert 'src="figures/' not in html and html.count('data:image/png;base64,') == 4
     results = json.loads((folder / 'results.json').read_text())
-    assert results['configurations'] == {'defaults': ['seed1', 'seed2']}
-    iqm = results['aggregates']['success_rate']['defaults']['IQM']
+    assert results['configurations'] == {CONFIG: ['seed1', 'seed2']}
+    iqm = results['aggregates']['success_rate'][CONFIG]['IQM']
+    assert {(r['seed'], r['config']) for r in results['anatomy']} >= {(1, CONFIG), (2, CONFIG),
+                                                                      ('all', CONFIG)}
     assert iqm['low'] <= iqm['point'] <= iqm['high']
     assert {r['policy'] for r in results['banks']} == {'random', 'servo',
                                                        'DQN final (all seeds pooled)'}
@@ -220,3 +225,54 @@ def test_ctrl_c_leaves_no_process_and_a_resumable_sweep(tmp_path):
                  'config_file': '', 'seed': seed}
         assert '--resume' in train_command(trial)  # continues from its newest checkpoint
     assert spec['seeds'] == [1, 2]
+
+
+def test_eta_times_each_kind_of_trial_on_its_own():
+    from nav_eval.sweep_tune import eta_text
+    durations = {'train': [600.0, 700.0], 'baseline': [60.0]}
+    # 3 training trials of ~650 s and one baseline of ~60 s, not 4 x the mean of all three
+    assert eta_text(durations, {'train': 3, 'baseline': 1}, 1) == '00:33:30'
+    # two at once: 2 waves of training trials, 1 of baselines
+    assert eta_text(durations, {'train': 3, 'baseline': 1}, 2) == '00:22:40'
+    # a kind with no finished trial yet takes the mean of all finished trials
+    assert eta_text({'baseline': [60.0]}, {'train': 1, 'baseline': 0}, 1) == '00:01:00'
+    assert eta_text(durations, {'train': 0, 'baseline': 0}, 1) == '0 s'
+    assert eta_text({}, {'train': 2}, 1) == '–'
+
+
+def test_progress_counts_each_trial_once_across_a_resume(capsys):
+    from types import SimpleNamespace
+
+    from nav_eval.sweep_tune import ProgressLines
+    trials = [{'name': f'seed{i}', 'kind': 'train', 'log': 'x.log'} for i in (1, 2, 3)]
+    trials.append({'name': 'baselines', 'kind': 'baseline', 'log': 'y.log'})
+    fake = {t['name']: SimpleNamespace(config={'trial': t}, status='RUNNING') for t in trials}
+    progress = ProgressLines(trials, done={'seed1', 'not-a-trial'})  # seed1 ended before
+    assert (progress.ended, progress.total, dict(progress.remaining)) == (1, 4, {'train': 2,
+                                                                                 'baseline': 1})
+    for name in ('seed1', 'seed2', 'seed2'):  # seed1 re-runs nothing; seed2 reported twice
+        progress.on_trial_start(0, list(fake.values()), fake[name])
+        progress.on_trial_complete(0, list(fake.values()), fake[name])
+    assert progress.ended == 2 and dict(progress.remaining) == {'train': 1, 'baseline': 1}
+    assert list(progress.durations) == ['train'] and len(progress.durations['train']) == 1
+    progress.on_trial_error(0, list(fake.values()), fake['seed3'])
+    assert progress.ended == 3 and progress.remaining['train'] == 0
+    assert 'FAILED seed3 (3 of 4 done)' in capsys.readouterr().out
+
+
+def test_configuration_and_trial_names_and_those_of_older_sweeps(tmp_path):
+    from nav_eval.sweep import NAMING, SweepSpec
+
+    def names(**kw):
+        return [(t['name'], t['config']) for t in SweepSpec(str(tmp_path), [1], **kw).trials()
+                if t['kind'] == 'train']
+
+    fixed = {'turn_rate': '0.5'}
+    assert names(naming=NAMING) == [('seed1', 'defaults')]
+    assert names(fixed=fixed, naming=NAMING) == [('seed1', 'turn_rate=0.5')]
+    assert names(grid={'a': ['1', '2']}, fixed=fixed, naming=NAMING) == [('a=1_seed1', 'a=1'),
+                                                                         ('a=2_seed1', 'a=2')]
+    assert names(grid={'a': ['1']}, naming=NAMING) == [('seed1', 'a=1')]
+    # a sweep.json written before configurations were named by --set (no 'naming'): as then
+    assert names(fixed=fixed) == [('seed1', 'defaults')]
+    assert names(grid={'a': ['1']}) == [('a=1_seed1', 'a=1')]

@@ -1,0 +1,127 @@
+"""Where an evaluated set's episodes spend their decisions (pure: numpy; no ROS).
+
+``nav-eval-diagnose`` follows one episode through every layer; this looks across all episodes
+of a set (and, in a sweep's report, across seeds) at the policy's two jobs: *finding* the goal
+(how many decisions pass before the goal is first in view) and *reaching* it once seen (the
+share of decisions taken with the goal in view, how many of them drive forward, and how often
+the policy reverses between left and right).  A time-out whose goal came into view late is a
+search failure; one that saw the goal most of the time and reversed all along is an approach
+failure.  The goal is "in view" in an observation when the diagnosis's goal-marker mask
+(:func:`nav_eval.layers.goal_mask`) has at least ``MIN_PIXELS`` pixels: more than the diagnosis
+needs to place a bearing, so that a sliver at the image edge does not count as found.
+
+Reads the traces ``nav-eval-evaluate`` writes: ``RUN/eval/traces/<set>/seed_<n>.json`` (the
+actions) and ``seed_<n>_frames.npz`` (the observation before each decision, then the last).
+"""
+
+from __future__ import annotations
+
+import json
+import statistics
+from collections.abc import Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from nav_eval.layers import goal_mask
+from nav_gym import run_dir as layout
+from nav_gym.actions import ACTION_NAMES
+
+MIN_PIXELS = 10  # fewer green pixels than this is noise at the image edge, not the goal
+LEFT, FORWARD, RIGHT = ACTION_NAMES.index('left'), ACTION_NAMES.index('forward'), \
+    ACTION_NAMES.index('right')
+OUTCOMES = ('success', 'timeout', 'collision')
+
+
+@dataclass(frozen=True)
+class EpisodeAnatomy:
+    """How one episode's decisions were spent."""
+
+    seed: int
+    outcome: str
+    decisions: int
+    first_in_view: int | None  # decisions taken before the goal was first in view; None: never
+    in_view: int  # decisions taken with the goal in view
+    forward_in_view: int  # of those, forward
+    reversals: int  # left -> right or right -> left between consecutive decisions
+
+
+def in_view(frames: np.ndarray) -> np.ndarray:
+    """Tell, per observation of a ``(T, 3, H, W)`` stack, whether the goal is in view."""
+    mask = goal_mask(np.moveaxis(frames, 1, 0))  # (T, H, W) at once
+    return mask.reshape(len(frames), -1).sum(axis=1) >= MIN_PIXELS
+
+
+def episode_anatomy(trace: dict[str, Any], frames: np.ndarray) -> EpisodeAnatomy:
+    """Describe one traced episode (``frames[i]`` is what decision ``i`` saw).
+
+    ``frames`` holds one observation per decision and the last one after it; a trace and
+    frames that disagree raise ValueError.
+    """
+    actions = [int(s['action']) for s in trace['steps']]
+    if len(frames) != len(actions) + 1:
+        raise ValueError(f"seed {trace.get('seed')}: {len(frames)} observations for "
+                         f'{len(actions)} decisions (expected one more)')
+    seen = in_view(frames[:len(actions)])
+    first = int(np.argmax(seen)) if seen.any() else None
+    return EpisodeAnatomy(
+        seed=int(trace['seed']), outcome=trace['outcome'], decisions=len(actions),
+        first_in_view=first, in_view=int(seen.sum()),
+        forward_in_view=sum(1 for a, s in zip(actions, seen, strict=True) if s and a == FORWARD),
+        reversals=sum(1 for a, b in zip(actions, actions[1:], strict=False)
+                      if {a, b} == {LEFT, RIGHT}))
+
+
+def set_anatomy(eval_dir: Path, set_name: str, seeds: Iterable[int] | None = None,
+                ) -> list[EpisodeAnatomy]:
+    """Describe the traced episodes of one evaluated set, by seed ([] without traces).
+
+    ``seeds``: only these (the set's seeds in its results: an earlier evaluation of other
+    seeds leaves its traces in the same folder).  An episode whose trace or frames are missing
+    or unreadable is left out.
+    """
+    wanted = None if seeds is None else set(seeds)
+    out = []
+    for path in layout.trace_files(eval_dir, set_name):
+        try:
+            trace = json.loads(path.read_text())
+            if wanted is not None and trace['seed'] not in wanted:
+                continue
+            with np.load(layout.frames_path(path)) as data:
+                frames = data['obs']
+            out.append(episode_anatomy(trace, frames))
+        except (OSError, ValueError, KeyError):
+            continue
+    return sorted(out, key=lambda e: e.seed)
+
+
+def summarise(episodes: Iterable[EpisodeAnatomy]) -> dict[str, dict[str, Any]]:
+    """Sum episodes up per outcome.
+
+    Per outcome: ``episodes``; ``median_first_in_view`` (decisions before the goal was first in
+    view, over the episodes that saw it) and ``never_in_view``; ``in_view_share`` (of all
+    decisions); ``forward_in_view`` (forward decisions among those with the goal in view);
+    ``reversals_per_100`` (left/right reversals per 100 decisions).
+    """
+    by_outcome: dict[str, list[EpisodeAnatomy]] = {}
+    for e in episodes:
+        by_outcome.setdefault(e.outcome, []).append(e)
+    out = {}
+    for outcome in sorted(by_outcome, key=lambda o: (o not in OUTCOMES, OUTCOMES.index(o)
+                                                     if o in OUTCOMES else 0, o)):
+        group = by_outcome[outcome]
+        firsts = [e.first_in_view for e in group if e.first_in_view is not None]
+        decisions = sum(e.decisions for e in group)
+        seen = sum(e.in_view for e in group)
+        out[outcome] = {
+            'episodes': len(group),
+            'median_first_in_view': statistics.median(firsts) if firsts else None,
+            'never_in_view': len(group) - len(firsts),
+            'in_view_share': seen / decisions if decisions else None,
+            'forward_in_view': sum(e.forward_in_view for e in group) / seen if seen else None,
+            'reversals_per_100': 100 * sum(e.reversals for e in group) / decisions
+            if decisions else None}
+    return out
+

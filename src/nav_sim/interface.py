@@ -1,0 +1,22 @@
+"""The sim node's ROS 2 interface: its topic and service names (no dependencies, no rclpy).
+
+Names are relative, so they resolve in the node's namespace (``ros2 run nav_sim sim_node
+--ros-args -r __ns:=/robot1`` publishes ``/robot1/camera/image_raw``).  One definition shared by
+the node, its client, the graph checks, the bag recorder and the bag reader.
+"""
+
+from __future__ import annotations
+
+NODE_NAME = 'sim_node'
+
+IMAGE_TOPIC = 'camera/image_raw'  # sensor_msgs/Image, rgb8, one per control period
+CAMERA_INFO_TOPIC = 'camera/camera_info'  # sensor_msgs/CameraInfo, same stamp
+ODOM_TOPIC = 'odom'  # nav_msgs/Odometry, same stamp (privileged: evaluation only)
+EVENT_TOPIC = 'episode_event'  # diagnostic_msgs/DiagnosticArray (see nav_sim.ros_msgs)
+GOAL_TOPIC = 'goal_pose'  # geometry_msgs/PoseStamped, latched, at each reset
+CMD_VEL_TOPIC = 'cmd_vel'  # geometry_msgs/Twist: one control period per message
+CLOCK_TOPIC = '/clock'  # rosgraph_msgs/Clock, with publish_clock (global: ROS's sim time)
+
+RESET_SERVICE = 'reset'  # std_srvs/Trigger: a new episode (seed and split from parameters)
+STOP_SERVICE = 'stop'  # std_srvs/Trigger: stop the robot
+PARAMETERS_SERVICE = f'{NODE_NAME}/set_parameters'  # rcl_interfaces/SetParameters
