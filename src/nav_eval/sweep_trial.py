@@ -27,7 +27,7 @@ from nav_eval.errors import NavEvalError
 from nav_gym import run_dir as layout
 from nav_gym.checkpoints import checkpoints
 from nav_sim.domain import reserve_any_domain
-from nav_sim.sim_process import _stop_with_parent
+from nav_sim.sim_process import child_preexec
 
 LOG_TAIL_LINES = 15
 CURVE = 'curve'  # RUN/eval/curve/<steps>/results.json: the sample-efficiency evaluations
@@ -66,7 +66,7 @@ def run_child(command: list[str], env: dict[str, str], log: Path) -> None:
         # its own session: signals to the worker's process group do not reach it; it gets
         # exactly one SIGTERM when the worker dies (and then saves a checkpoint and exits)
         process = subprocess.Popen(command, stdout=handle, stderr=subprocess.STDOUT, env=env,
-                                   stdin=subprocess.DEVNULL, preexec_fn=_stop_with_parent,
+                                   stdin=subprocess.DEVNULL, preexec_fn=child_preexec,
                                    start_new_session=True)
         # if this thread ends early (the trial is stopped), the child gets its one SIGTERM
         # from PR_SET_PDEATHSIG: a second signal would interrupt the checkpoint it then saves

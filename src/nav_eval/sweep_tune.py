@@ -229,7 +229,10 @@ def _outcome(grid: Any, trials: list[dict[str, Any]]) -> Outcome:
     out = Outcome()
     seen = set()
     for result in grid:
-        trial = result.config['trial']
+        trial = (result.config or {}).get('trial')
+        if trial is None:  # a trial Ctrl-C stopped before it started: Tune kept no config
+            out.interrupted = True
+            continue
         name = trial['name']
         seen.add(name)
         out.attempts[name] = _attempts(Path(trial['log']))

@@ -187,8 +187,11 @@ def command_line(pid: int) -> str:
 
 
 def test_ctrl_c_leaves_no_process_and_a_resumable_sweep(tmp_path):
-    args = [*TINY, '--total-timesteps', '50000', '--curve-seeds', '']
-    process = subprocess.Popen([sys.executable, '-m', 'nav_eval.sweep', '--seeds', '1-2', *args,
+    # exactly two trials fit at once, whatever the CPU count
+    args = [*TINY, '--total-timesteps', '50000', '--curve-seeds', '',
+            '--cpus-per-trial', str(max(1.0, (os.cpu_count() or 2) / 2))]
+    # seeds 1 and 2 run at once (1 CPU each on 2), seed 3 waits: Ctrl-C stops it unstarted
+    process = subprocess.Popen([sys.executable, '-m', 'nav_eval.sweep', '--seeds', '1-3', *args,
                                 '--no-baselines', '--storage', str(tmp_path), '--name', 'c'],
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     folder = tmp_path / 'c'
@@ -224,7 +227,8 @@ def test_ctrl_c_leaves_no_process_and_a_resumable_sweep(tmp_path):
         trial = {'run_dir': str(folder / 'trials' / f'seed{seed}'), 'gpus': 0,
                  'config_file': '', 'seed': seed}
         assert '--resume' in train_command(trial)  # continues from its newest checkpoint
-    assert spec['seeds'] == [1, 2]
+    assert spec['seeds'] == [1, 2, 3]
+    assert not (folder / 'trials' / 'seed3').exists()
 
 
 def test_eta_times_each_kind_of_trial_on_its_own():

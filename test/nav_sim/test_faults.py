@@ -6,6 +6,7 @@ Each test starts real ``sim_node`` processes, as ``ros2 run`` does.
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import time
@@ -16,7 +17,7 @@ from rclpy.parameter_client import AsyncParameterClient
 
 from nav_sim.client import SimClient
 from nav_sim.errors import ScenarioError
-from nav_sim.sim_process import executable_command, ros_args
+from nav_sim.sim_process import SimProcess, executable_command, ros_args
 
 CLOCK_TICK = os.sysconf('SC_CLK_TCK')
 
@@ -137,3 +138,28 @@ def test_an_idle_lockstep_sim_sleeps_yet_answers_at_once(namespace):
     finally:
         code, output = interrupt(process)
     assert code == 0 and 'Traceback' not in output, output
+
+
+def test_a_sim_stops_at_sigint_even_if_its_parent_blocks_and_ignores_sigint(namespace):
+    # a Ray worker (a sweep trial's trainer) blocks and ignores SIGINT, and a child inherits both
+    # through exec: without a clean signal state the sim missed the SIGINT of stop() and was
+    # killed after the timeout
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        sim = SimProcess(namespace)
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        signal.signal(signal.SIGINT, previous)
+    try:
+        with SimClient(namespace, timeout=15.0) as client:
+            client.wait_for_sim(60.0)
+        status = Path(f'/proc/{sim.process.pid}/status').read_text()
+        blocked = int(re.search(r'SigBlk:\s*([0-9a-f]+)', status).group(1), 16)
+        assert not blocked & (1 << (signal.SIGINT - 1)), status
+        start_time = time.monotonic()
+        code = sim.stop(timeout=8.0)
+        took = time.monotonic() - start_time
+    finally:
+        sim.stop()
+    assert code == 0 and took < 8.0, f'exit code {code} after {took:.1f} s'
