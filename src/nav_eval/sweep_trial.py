@@ -1,11 +1,13 @@
-"""One trial of a sweep: the plain commands as child processes, in a ROS domain of its own.
+"""One trial of a sweep: the plain commands in a child process, in a ROS domain of its own.
 
-A training trial is ``nav-gym-train`` (or ``--resume`` from the newest checkpoint when the
-run directory already holds one), then one child (``python -m nav_eval.sweep_trial``) that
-evaluates with ``nav_eval.evaluate`` the final model on the sweep's training and held-out seeds,
-and every checkpoint on a small held-out set for the sample-efficiency curve.  A baseline trial
-is ``python -m nav_eval.baselines`` for one configuration.  Every stage whose output exists is
-skipped, so a retried or resumed trial continues where it stopped.  Children run with a
+A training trial is one child (``python -m nav_eval.sweep_trial TRIAL_JSON``) that runs
+``nav-gym-train`` (or ``--resume`` from the newest checkpoint when the run directory already
+holds one) and then evaluates with ``nav_eval.evaluate`` the final model on the sweep's training
+and held-out seeds, and every checkpoint on a small held-out set for the sample-efficiency
+curve: the same code as the plain commands, in one process so that torch, Stable-Baselines3
+and rclpy are imported once.  A baseline trial is ``python -m nav_eval.baselines`` for one
+configuration.  Every stage whose output exists is skipped, so a retried or resumed trial
+continues where it stopped.  Children run with a
 host-locally reserved ``ROS_DOMAIN_ID``, localhost discovery, the trial's CPU count as their
 thread count, and die with the process that started them.  No Ray import: the sweep calls
 :func:`run_trial` from its Tune trainable.
@@ -57,8 +59,11 @@ def child_environment(base: dict[str, str], cpus: int) -> dict[str, str]:
     return env
 
 
-def run_child(command: list[str], env: dict[str, str], log: Path) -> None:
-    """Run one stage, its output appended to ``log``; raise TrialFailedError if it fails."""
+def run_child(command: list[str], env: dict[str, str], log: Path, what: str = '') -> None:
+    """Run one stage, its output appended to ``log``; raise TrialFailedError if it fails.
+
+    ``what`` names the stage in the error (default: the command).
+    """
     with open(log, 'ab') as handle:
         handle.write(f'\n$ {" ".join(command)}\n'.encode())
         handle.flush()
@@ -73,8 +78,8 @@ def run_child(command: list[str], env: dict[str, str], log: Path) -> None:
         code = process.wait()
         handle.write(f'# exit code {code} after {time.monotonic() - start:.1f} s\n'.encode())
     if code != 0:
-        stage = ' '.join(command[2:4])[:60]
-        raise TrialFailedError(f'`{stage}` exited with code {code}; the end of {log}:\n'
+        stage = what or f"`{' '.join(command[2:4])[:60]}`"
+        raise TrialFailedError(f'{stage} exited with code {code}; the end of {log}:\n'
                                f'{log_tail(log)}')
 
 
@@ -134,11 +139,30 @@ def evaluate_trial(trial: dict[str, Any]) -> None:
         print(f'evaluated {names} ({early or "final model"}) -> {out}', flush=True)
 
 
-def eval_command(trial: dict[str, Any]) -> list[str] | None:
-    """Return the evaluation stage of a trial, or None when every evaluation exists."""
-    if not missing_evaluations(trial):
+def trial_command(trial: dict[str, Any]) -> list[str] | None:
+    """Return the child that trains and evaluates a trial, or None when nothing is left."""
+    if trial_finished(trial):
         return None
     return [sys.executable, '-m', 'nav_eval.sweep_trial', json.dumps(trial)]
+
+
+def train_and_evaluate(trial: dict[str, Any]) -> int:
+    """Run a trial's remaining stages in this process; return the exit code (130: stopped).
+
+    Training is ``nav-gym-train``'s own entry point (its arguments, its Ctrl-C and SIGTERM
+    handling: a stopped run saves a checkpoint); evaluation follows only a finished training.
+    """
+    command = train_command(trial)
+    if command is not None:
+        from nav_gym.train import main as train_main
+        print(f"$ nav-gym-train {' '.join(command[3:])}", flush=True)
+        try:
+            train_main(command[3:])
+        except SystemExit as exc:
+            if exc.code:
+                return exc.code if isinstance(exc.code, int) else 1
+    evaluate_trial(trial)
+    return 0
 
 
 def baseline_command(trial: dict[str, Any]) -> list[str] | None:
@@ -206,27 +230,23 @@ def run_trial(trial: dict[str, Any], report: Callable[[dict[str, Any]], None]) -
                 Path(trial['out']).parent.mkdir(parents=True, exist_ok=True)
                 run_child(command, env, log)
         else:
-            command = train_command(trial)
+            command = trial_command(trial)
             if command is not None:
-                run_child(command, env, log)
-            command = eval_command(trial)
-            if command is not None:
-                run_child(command, env, log)
+                run_child(command, env, log, f"seed {trial['seed']}'s training and evaluation")
         figures = headline(trial)
     report({**figures, 'domain_id': domain.domain_id, 'pid': os.getpid(),
             'trial_wall_s': round(time.monotonic() - start, 1), 'complete': True})
 
 
 def main(argv: list[str] | None = None) -> None:
-    """Evaluate one trial (its JSON as the argument): the sweep's evaluation stage."""
+    """Train and evaluate one trial (its JSON as the argument): a sweep trial's child."""
     from nav_gym.cli import run_command
     from nav_gym.timing import quiet_learner_threads
     args = sys.argv[1:] if argv is None else argv
     quiet_learner_threads()  # before torch: the policy's forward passes must not spin
 
     def body() -> int:
-        evaluate_trial(json.loads(args[0]))
-        return 0
+        return train_and_evaluate(json.loads(args[0]))
 
     run_command('nav_eval.sweep_trial', body)
 
