@@ -26,13 +26,13 @@ from typing import Any
 import numpy as np
 
 from nav_eval.layers import goal_mask
+from nav_eval.metrics import OUTCOMES
 from nav_gym import run_dir as layout
 from nav_gym.actions import ACTION_NAMES
 
 MIN_PIXELS = 10  # fewer green pixels than this is noise at the image edge, not the goal
 LEFT, FORWARD, RIGHT = ACTION_NAMES.index('left'), ACTION_NAMES.index('forward'), \
     ACTION_NAMES.index('right')
-OUTCOMES = ('success', 'timeout', 'collision')
 
 
 @dataclass(frozen=True)
