@@ -69,10 +69,11 @@ def swept(folder: Path, steps: int, seeds: list[int], env: dict[str, str]) -> fl
                '--curve-seeds', '', '--no-baselines', '--cpus-per-trial', str(os.cpu_count()),
                '--storage', str(folder), '--name', 'sweep']
     seconds = run(command, env, show=True)
-    for log in sorted((folder / 'sweep' / 'logs').glob('*.log')):  # each stage under Ray
-        stages = [line.split(' after ')[-1] for line in log.read_text().splitlines()
-                  if line.startswith('# exit code')]
-        print(f"    {log.stem}: stages {', '.join(stages)}", flush=True)
+    for log in sorted((folder / 'sweep' / 'logs').glob('*.log')):  # the trial's child
+        times = {('training' if line.startswith('# training') else 'whole child'):
+                 line.split(' after ')[-1] for line in log.read_text().splitlines()
+                 if line.startswith(('# training exited', '# exit code'))}
+        print(f"    {log.stem}: {', '.join(f'{k} {v}' for k, v in times.items())}", flush=True)
     # the statistics alone, on the same trials (the plain commands compute none)
     AGGREGATION.append(run([sys.executable, '-m', 'nav_eval.sweep', '--aggregate',
                             str(folder / 'sweep')], env))

@@ -15,9 +15,11 @@ thread count, and die with the process that started them.  No Ray import: the sw
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -83,19 +85,18 @@ def run_child(command: list[str], env: dict[str, str], log: Path, what: str = ''
                                f'{log_tail(log)}')
 
 
-def train_command(trial: dict[str, Any]) -> list[str] | None:
-    """Return the training stage of a trial (fresh or ``--resume``), or None when it is done."""
+def train_args(trial: dict[str, Any]) -> list[str] | None:
+    """Return ``nav-gym-train``'s arguments for a trial (fresh or ``--resume``), None when done."""
     run_dir = Path(trial['run_dir'])
     if (run_dir / layout.FINAL_MODEL).is_file():
         return None
-    python = [sys.executable, '-m', 'nav_gym.train']
     device = ['--device', 'cuda' if trial['gpus'] > 0 else 'cpu']
     if (run_dir / layout.CONFIG).is_file() and checkpoints(run_dir):
-        return python + ['--resume', str(run_dir)] + device
+        return ['--resume', str(run_dir)] + device
     if run_dir.exists():  # stopped before its first checkpoint: nothing to resume from
         shutil.rmtree(run_dir)
-    return python + ['--config', trial['config_file'], '--seed', str(trial['seed']),
-                     '--runs-dir', str(run_dir.parent), '--run-name', run_dir.name] + device
+    return ['--config', trial['config_file'], '--seed', str(trial['seed']), '--runs-dir',
+            str(run_dir.parent), '--run-name', run_dir.name] + device
 
 
 def has_sets(results: Path, names: list[str], seeds: dict[str, list[int]]) -> bool:
@@ -152,15 +153,22 @@ def train_and_evaluate(trial: dict[str, Any]) -> int:
     Training is ``nav-gym-train``'s own entry point (its arguments, its Ctrl-C and SIGTERM
     handling: a stopped run saves a checkpoint); evaluation follows only a finished training.
     """
-    command = train_command(trial)
-    if command is not None:
+    args = train_args(trial)
+    if args is not None:
         from nav_gym.train import main as train_main
-        print(f"$ nav-gym-train {' '.join(command[3:])}", flush=True)
+        print(f"$ nav-gym-train {' '.join(args)}", flush=True)
+        start, code = time.monotonic(), 0
         try:
-            train_main(command[3:])
+            train_main(args)
         except SystemExit as exc:
-            if exc.code:
-                return exc.code if isinstance(exc.code, int) else 1
+            code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
+        print(f'# training exited with code {code} after {time.monotonic() - start:.1f} s',
+              flush=True)
+        if code:
+            return code
+        # the model and its replay buffer (GBs) are left in a reference cycle (the training
+        # callback keeps learn()'s locals): free them before the evaluation
+        gc.collect()
     evaluate_trial(trial)
     return 0
 
@@ -232,7 +240,7 @@ def run_trial(trial: dict[str, Any], report: Callable[[dict[str, Any]], None]) -
         else:
             command = trial_command(trial)
             if command is not None:
-                run_child(command, env, log, f"seed {trial['seed']}'s training and evaluation")
+                run_child(command, env, log, f"trial {trial['name']} (training and evaluation)")
         figures = headline(trial)
     report({**figures, 'domain_id': domain.domain_id, 'pid': os.getpid(),
             'trial_wall_s': round(time.monotonic() - start, 1), 'complete': True})
@@ -242,8 +250,11 @@ def main(argv: list[str] | None = None) -> None:
     """Train and evaluate one trial (its JSON as the argument): a sweep trial's child."""
     from nav_gym.cli import run_command
     from nav_gym.timing import quiet_learner_threads
+    from nav_gym.train import raise_keyboard_interrupt
     args = sys.argv[1:] if argv is None else argv
     quiet_learner_threads()  # before torch: the policy's forward passes must not spin
+    # SIGTERM (the Ray worker died) stops training or evaluation as Ctrl-C does, with cleanup
+    signal.signal(signal.SIGTERM, raise_keyboard_interrupt)
 
     def body() -> int:
         return train_and_evaluate(json.loads(args[0]))

@@ -389,7 +389,7 @@ def main(argv: list[str] | None = None) -> None:
     add_live_argument(parser)
     args = parser.parse_args(strip_ros_args(argv))
     overrides = {k: v for k, v in vars(args).items() if k in train_config.FIELDS}
-    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+    signal.signal(signal.SIGTERM, raise_keyboard_interrupt)
     quiet_learner_threads()
 
     def body() -> int:
@@ -410,7 +410,8 @@ def main(argv: list[str] | None = None) -> None:
     run_command('nav-gym-train', body)
 
 
-def _raise_keyboard_interrupt(signum: int, frame: Any) -> None:
+def raise_keyboard_interrupt(signum: int, frame: Any) -> None:
+    """Handle SIGTERM as Ctrl-C (a stopped run saves a checkpoint and exits 130)."""
     raise KeyboardInterrupt
 
 

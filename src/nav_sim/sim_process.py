@@ -74,22 +74,19 @@ def child_preexec() -> None:
     """Start a child with a clean signal state and SIGTERM when its parent dies (before exec).
 
     A parent may block or ignore SIGINT (a Ray worker does both; a background job of a
-    non-interactive shell ignores it), and both pass through exec: a sim that inherited them
-    never saw the SIGINT that stops it, so every stop waited out its timeout and then killed
-    it.  The child starts with no blocked signal and the default SIGINT and SIGTERM, as a
-    command started from a terminal does.  And even if the parent is killed by SIGKILL, the
-    child gets SIGTERM: a lockstep sim never outlives the env that started it (Linux prctl
-    PR_SET_PDEATHSIG).  Dispositions are set with libc's ``signal``: Python's works only in
-    the main thread, and the parent may start the child from another (a Tune trainable does).
+    non-interactive shell ignores it), and both pass through exec: a sim that inherited the
+    blocked SIGINT never saw the SIGINT that stops it, so every stop waited out its timeout and
+    then killed it.  The child starts with the default SIGINT and SIGTERM and no blocked
+    signal, as a command started from a terminal does.  And even if the parent is killed by
+    SIGKILL, the child gets SIGTERM: a lockstep sim never outlives the env that started it
+    (Linux prctl PR_SET_PDEATHSIG).
     """
+    for number in (signal.SIGINT, signal.SIGTERM):  # after fork, this thread is the main one
+        signal.signal(number, signal.SIG_DFL)
     signal.pthread_sigmask(signal.SIG_SETMASK, ())
     if sys.platform.startswith('linux'):
         import ctypes
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.signal.argtypes = (ctypes.c_int, ctypes.c_void_p)
-        for number in (signal.SIGINT, signal.SIGTERM):
-            libc.signal(int(number), None)  # SIG_DFL (0)
-        libc.prctl(1, signal.SIGTERM)  # PR_SET_PDEATHSIG = 1
+        ctypes.CDLL(None, use_errno=True).prctl(1, ctypes.c_ulong(signal.SIGTERM))  # PDEATHSIG
 
 
 class SimProcess:

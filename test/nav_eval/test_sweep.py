@@ -20,7 +20,7 @@ import pytest
 import yaml
 
 from nav_eval.sweep_report import SECTIONS
-from nav_eval.sweep_trial import train_command
+from nav_eval.sweep_trial import train_args
 
 TINY = ['--total-timesteps', '200', '--set', 'learning_starts=100', '--set', 'checkpoint_freq=100',
         '--set', 'buffer_size=500', '--set', 'max_episode_steps=12', '--train-seeds', '101-102',
@@ -227,7 +227,7 @@ def test_ctrl_c_leaves_no_process_and_a_resumable_sweep(tmp_path):
     for seed in (1, 2):
         trial = {'run_dir': str(folder / 'trials' / f'seed{seed}'), 'gpus': 0,
                  'config_file': '', 'seed': seed}
-        assert '--resume' in train_command(trial)  # continues from its newest checkpoint
+        assert '--resume' in train_args(trial)  # continues from its newest checkpoint
     assert spec['seeds'] == [1, 2, 3]
     assert not (folder / 'trials' / 'seed3').exists()
 
@@ -281,3 +281,22 @@ def test_configuration_and_trial_names_and_those_of_older_sweeps(tmp_path):
     # a sweep.json written before configurations were named by --set (no 'naming'): as then
     assert names(fixed=fixed) == [('seed1', 'defaults')]
     assert names(grid={'a': ['1']}) == [('a=1_seed1', 'a=1')]
+
+
+@pytest.mark.parametrize(('exit_code', 'returned', 'evaluated'), [
+    (0, 0, True), (None, 0, True), (130, 130, False), (1, 1, False), ('bad', 1, False)])
+def test_a_trial_child_evaluates_only_after_a_finished_training(monkeypatch, exit_code,
+                                                                returned, evaluated):
+    import nav_gym.train
+    from nav_eval import sweep_trial
+    calls = []
+
+    def train_main(argv):
+        calls.append(('train', argv))
+        raise SystemExit(exit_code)
+
+    monkeypatch.setattr(nav_gym.train, 'main', train_main)
+    monkeypatch.setattr(sweep_trial, 'train_args', lambda trial: ['--seed', '1'])
+    monkeypatch.setattr(sweep_trial, 'evaluate_trial', lambda trial: calls.append(('evaluate',)))
+    assert sweep_trial.train_and_evaluate({'name': 'seed1'}) == returned
+    assert calls == [('train', ['--seed', '1'])] + ([('evaluate',)] if evaluated else [])

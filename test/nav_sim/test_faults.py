@@ -9,6 +9,7 @@ import os
 import re
 import signal
 import subprocess
+import threading
 import time
 from pathlib import Path
 
@@ -144,13 +145,27 @@ def test_a_sim_stops_at_sigint_even_if_its_parent_blocks_and_ignores_sigint(name
     # a Ray worker (a sweep trial's trainer) blocks and ignores SIGINT, and a child inherits both
     # through exec: without a clean signal state the sim missed the SIGINT of stop() and was
     # killed after the timeout
+    # and starts its children from a thread other than the main one (Tune's trainable thread),
+    # which lives as long as they do (PR_SET_PDEATHSIG follows the thread that forked)
+    started: list[SimProcess] = []
+    ready, done = threading.Event(), threading.Event()
+
+    def start_blocked() -> None:  # the signal mask is per thread
+        signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            started.append(SimProcess(namespace))
+        finally:
+            ready.set()
+        done.wait(120.0)
+
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    thread = threading.Thread(target=start_blocked)
     try:
-        sim = SimProcess(namespace)
+        thread.start()
+        assert ready.wait(60.0) and started, 'the sim did not start'
     finally:
-        signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         signal.signal(signal.SIGINT, previous)
+    sim = started[0]
     try:
         with SimClient(namespace, timeout=15.0) as client:
             client.wait_for_sim(60.0)
@@ -162,4 +177,6 @@ def test_a_sim_stops_at_sigint_even_if_its_parent_blocks_and_ignores_sigint(name
         took = time.monotonic() - start_time
     finally:
         sim.stop()
+        done.set()
+        thread.join(10.0)
     assert code == 0 and took < 8.0, f'exit code {code} after {took:.1f} s'
