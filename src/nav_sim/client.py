@@ -36,6 +36,8 @@ from nav_sim.errors import FrameSyncError, ScenarioError, SimConflictError, SimU
 POLL_S = 0.25
 RESET_RETRY_S = 1.0
 NAMES_WAIT_S = 3.0  # for the names of conflicting sims still being discovered
+#: how pybind11 reports an exception raised while it converted a call's arguments
+PYBIND11_CONVERSION_ERROR = 'Unable to convert call argument'
 
 
 @dataclass(frozen=True)
@@ -187,7 +189,7 @@ class SimClient:
         ready = ws.get_ready_entities('subscription')
         for sub in self._subs:
             if sub.handle.pointer in ready:
-                taken = sub.handle.take_message(sub.msg_type, sub.raw)
+                taken = _take(sub)
                 if taken is not None:
                     sub.callback(taken[0])
 
@@ -361,3 +363,19 @@ def _parameter_msg(name: str, value: Any) -> ParameterMsg:
     else:
         pv.type, pv.string_value = ParameterType.PARAMETER_STRING, str(value)
     return ParameterMsg(name=name, value=pv)
+
+
+def _take(sub: Any) -> Any:
+    """Take one message from a ready subscription (rclpy's ``take_message``).
+
+    A Ctrl-C (or a SIGTERM turned into KeyboardInterrupt) whose Python handler runs while
+    pybind11 converts the call's arguments surfaces as ``RuntimeError: Unable to convert call
+    argument ...`` instead of the KeyboardInterrupt: raise that, so that an interrupted run
+    saves its checkpoint instead of failing.
+    """
+    try:
+        return sub.handle.take_message(sub.msg_type, sub.raw)
+    except RuntimeError as exc:
+        if str(exc).startswith(PYBIND11_CONVERSION_ERROR):
+            raise KeyboardInterrupt from exc
+        raise

@@ -120,7 +120,9 @@ def test_an_idle_lockstep_sim_sleeps_yet_answers_at_once(namespace):
             time.sleep(deadline - time.monotonic())
         used = cpu_seconds(process.pid) - before
         share = used / (time.monotonic() - start_time)
-        assert share < 0.05, f'an idle lockstep sim used {share:.1%} of a core (polling?)'
+        # a polling sim uses most of a core; a blocked one ~1 % (DDS housekeeping), a little
+        # more on a loaded machine
+        assert share < 0.10, f'an idle lockstep sim used {share:.1%} of a core (polling?)'
         with SimClient(namespace, timeout=15.0) as client:
             client.wait_for_sim(60.0)
             start_time = time.monotonic()
@@ -180,3 +182,25 @@ def test_a_sim_stops_at_sigint_even_if_its_parent_blocks_and_ignores_sigint(name
         done.set()
         thread.join(10.0)
     assert code == 0 and took < 8.0, f'exit code {code} after {took:.1f} s'
+
+
+def test_ctrl_c_during_a_take_is_an_interrupt_not_a_runtime_error():
+    # the race CI hit: the KeyboardInterrupt of a Ctrl-C raised while pybind11 converted
+    # take_message's arguments came out as RuntimeError, and the trainer failed (exit 1)
+    # instead of saving its checkpoint (exit 130)
+    from types import SimpleNamespace
+
+    from nav_sim.client import _take
+
+    def interrupted(msg_type, raw):
+        raise RuntimeError("Unable to convert call argument '0' to Python object")
+
+    def broken(msg_type, raw):
+        raise RuntimeError('something else')
+
+    with pytest.raises(KeyboardInterrupt):
+        _take(SimpleNamespace(handle=SimpleNamespace(take_message=interrupted),
+                              msg_type=object, raw=False))
+    with pytest.raises(RuntimeError, match='something else'):
+        _take(SimpleNamespace(handle=SimpleNamespace(take_message=broken), msg_type=object,
+                              raw=False))
