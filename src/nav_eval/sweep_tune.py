@@ -67,8 +67,12 @@ class ProgressLines(tune.Callback):
         self.started: dict[str, float] = {}
         self.durations: dict[str, list[float]] = {}
         self.results: dict[str, dict[str, Any]] = {}
-        self.ended = self.total - len(todo)
         self.parallel = 1
+
+    @property
+    def ended(self) -> int:
+        """How many trials have ended (finished or failed for good), this session or before."""
+        return len(self.ended_names)
 
     def _line(self, text: str) -> None:
         elapsed = time.strftime('%H:%M:%S', time.gmtime(time.monotonic() - self.start))
@@ -80,7 +84,6 @@ class ProgressLines(tune.Callback):
         if name in self.ended_names:
             return False
         self.ended_names.add(name)
-        self.ended += 1
         return True
 
     def on_trial_start(self, iteration: int, trials: list, trial: Any, **info: Any) -> None:
