@@ -21,7 +21,9 @@ from nav_sim.errors import ScenarioError
 SPLIT_IDS = {'train': 0, 'heldout': 1}
 OBSTACLE_GAP = 0.15       # free gap between obstacles and to walls (> robot diameter 0.074 m)
 START_CLEARANCE = 0.05    # extra free space around the robot at its start pose
-GOAL_CLEARANCE = 0.06     # extra free space around the goal position
+GOAL_CLEARANCE = 0.11     # free space around the goal position (m), whatever the marker's size
+GOAL_MARGIN = 0.06        # ... and at least this much beyond the robot's body
+MARKER_GAP = 0.01         # ... and beyond the goal marker, which never touches an obstacle
 MIN_LAYOUT_DIFFERENCE = 0.1  # a held-out layout differs from every training one by > 10 cm
 MAX_TRIES = 10_000
 
@@ -193,7 +195,10 @@ def sample_scenario(seed: Any, split: str, banks: dict[str, tuple[Layout, ...]],
     start_xy = _sample_point(rng, layout, geometry, geometry.robot_radius + START_CLEARANCE,
                              'start')
     yaw = float(rng.uniform(-math.pi, math.pi))
-    goal_clearance = max(geometry.robot_radius, config.goal_marker_radius) + GOAL_CLEARANCE
+    # a marker up to 10 cm in radius draws the same goals: the look of the goal leaves the
+    # scenarios alone, so a marker change is measured on the same episodes
+    goal_clearance = max(GOAL_CLEARANCE, geometry.robot_radius + GOAL_MARGIN,
+                         config.goal_marker_radius + MARKER_GAP)
     goal = _sample_point(rng, layout, geometry, goal_clearance, 'goal', far_from=start_xy,
                          min_distance=config.min_start_goal_distance)
     distance = math.hypot(goal[0] - start_xy[0], goal[1] - start_xy[1])

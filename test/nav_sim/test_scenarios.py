@@ -51,6 +51,24 @@ def test_scenarios_respect_constraints(sim):
             assert math.isclose(s.initial_distance, math.dist(s.start[:2], s.goal))
 
 
+@pytest.mark.parametrize('marker_radius, same_goals', [(0.1, True), (0.2, False)])
+def test_the_goal_marker_never_touches_an_obstacle_and_up_to_10_cm_keeps_the_scenarios(
+        sim, marker_radius, same_goals):
+    geometry = sim.world.geometry
+    config = SimConfig(goal_marker_radius=marker_radius)
+    goals, default_goals = [], []
+    for split, seeds in (('train', range(101, 151)), ('heldout', range(201, 251))):
+        for seed in seeds:
+            s = sample_scenario(seed, split, sim.banks, geometry, config)
+            default = sample_scenario(seed, split, sim.banks, geometry, sim.config)
+            assert clearance(s.goal[0], s.goal[1], s.layout, geometry) > marker_radius
+            assert (s.start, s.layout) == (default.start, default.layout)
+            goals.append(s.goal)
+            default_goals.append(default.goal)
+    # the look of the goal leaves the episodes alone until the marker needs more room
+    assert (goals == default_goals) is same_goals
+
+
 def test_layout_obstacles_keep_a_gap_a_robot_fits_through(sim):
     geometry = sim.world.geometry
     for layout in sim.banks['train'] + sim.banks['heldout']:
