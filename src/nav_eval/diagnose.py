@@ -68,11 +68,9 @@ def training_evidence(run_dir: Path, final_eps: float, tail: int = 50) -> dict |
 
 def rerun(run_dir: Path, trace: dict) -> list[int]:
     """Replay the episode's seed with the same policy; returns the actions it took."""
-    from nav_eval.evaluate import env_for_run, run_config, run_episode
-    from nav_eval.policies import DQNPolicy, RandomPolicy
+    from nav_eval.evaluate import env_for_run, make_policy, run_config, run_episode
     config = run_config(run_dir)
-    policy = (RandomPolicy() if trace['policy'] == 'random'
-              else DQNPolicy(run_dir / trace['checkpoint']))
+    policy = make_policy(trace['policy'], run_dir, trace['checkpoint'])
     env = env_for_run(config, record=False)
     try:
         _, replay, _ = run_episode(env, policy, trace['seed'], trace['split'])

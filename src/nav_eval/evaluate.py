@@ -28,7 +28,7 @@ import numpy as np
 
 from nav_eval import metrics
 from nav_eval.errors import EvaluationError
-from nav_eval.policies import DQNPolicy, Policy, RandomPolicy
+from nav_eval.policies import DQNPolicy, ExploringDQNPolicy, Policy, RandomPolicy
 from nav_gym import run_dir as layout
 from nav_gym.checkpoints import checkpoints
 from nav_gym.cli import run_command, strip_ros_args
@@ -45,8 +45,14 @@ HELDOUT_SEEDS = tuple(range(201, 211))
 SET_LABELS = {
     'random_train': 'Random policy, training seeds', 'dqn_train': 'DQN final, training seeds',
     'dqn_heldout': 'DQN final, held-out seeds', 'early_train': 'DQN early, training seeds',
-    'early_heldout': 'DQN early, held-out seeds'}
-DEFAULT_SETS = tuple(SET_LABELS)
+    'early_heldout': 'DQN early, held-out seeds',
+    # a diagnosis, not in the defaults: the final model with training's final exploration
+    'explore_train': 'DQN final with training ε, training seeds',
+    'explore_heldout': 'DQN final with training ε, held-out seeds'}
+#: the workshop's evaluation: deterministic policies only
+DEFAULT_SETS = ('random_train', 'dqn_train', 'dqn_heldout', 'early_train', 'early_heldout')
+#: evaluation set kind (its name's first word) -> the policy that plays it
+SET_POLICIES = {'random': 'random', 'dqn': 'dqn', 'early': 'dqn', 'explore': 'explore'}
 #: where the sim was when the episode started (not part of the scenario; the bag has them)
 SIM_COUNTERS = ('episode', 'period', 'stamp_ns')
 WARM_UP_WAIT_S = 0.5  # how long a warm-up period may take to reach the recorder
@@ -112,12 +118,11 @@ def plan_sets(run_dir: Path, names: list[str], train_seeds: tuple[int, ...],
         if kind == 'early' and early is None:
             print(f'skipping {name}: the run has no checkpoint after step 0')
             continue
-        checkpoint = {'random': None, 'dqn': final, 'early': early}[kind]
+        checkpoint = {'random': None, 'dqn': final, 'early': early, 'explore': final}[kind]
         if checkpoint is not None and not (run_dir / checkpoint).is_file():
             raise EvaluationError(f'{name}: checkpoint {run_dir / checkpoint} not found; '
                                   'finish (or --resume) the training run first')
-        out.append(EvalSet(name, SET_LABELS[name], 'random' if kind == 'random' else 'dqn',
-                           checkpoint, split, seeds))
+        out.append(EvalSet(name, SET_LABELS[name], SET_POLICIES[kind], checkpoint, split, seeds))
     return out
 
 
@@ -182,11 +187,20 @@ def arena_description(sim_params: dict[str, Any]) -> dict[str, Any]:
                        for s in g.shapes]}
 
 
+def make_policy(kind: str, run_dir: Path, checkpoint: str | None) -> Policy:
+    """Return the policy of an evaluation set or trace (``SET_POLICIES``' values)."""
+    if kind == 'random':
+        return RandomPolicy()
+    if kind == 'explore':
+        epsilon = run_config(run_dir).exploration_final_eps
+        return ExploringDQNPolicy(run_dir / str(checkpoint), epsilon)
+    return DQNPolicy(run_dir / str(checkpoint))
+
+
 def evaluate_set(env: NavigationEnv, run_dir: Path, eval_set: EvalSet, out: Path,
                  record: bool) -> dict[str, Any]:
     """Run every seed of a set; write its traces (and bag); return its results entry."""
-    policy: Policy = (RandomPolicy() if eval_set.policy == 'random'
-                      else DQNPolicy(run_dir / str(eval_set.checkpoint)))
+    policy = make_policy(eval_set.policy, run_dir, eval_set.checkpoint)
     layout.trace_path(out, eval_set.name, 0).parent.mkdir(parents=True, exist_ok=True)
     recorder = _open_recorder(out / 'bags' / eval_set.name, env) if record else None
     scene_writer = None

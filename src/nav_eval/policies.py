@@ -1,7 +1,7 @@
 """Policies for evaluation, each acting on the observation image only.
 
 The frozen DQN (deterministic, with its Q-values), a seeded uniform-random baseline and a
-scripted visual servo.
+scripted visual servo; for diagnosis, the frozen DQN with training's final exploration.
 """
 
 from __future__ import annotations
@@ -104,6 +104,37 @@ class DQNPolicy:
         """Take the greedy action; also return the Q-values it was chosen from."""
         action, _ = self.model.predict(observation, deterministic=True)
         return int(action), [round(float(q), 6) for q in self.q_values(observation)]
+
+
+class ExploringDQNPolicy(DQNPolicy):
+    """The frozen DQN acting as it did late in training, with training's final exploration.
+
+    A uniform-random action with probability ``epsilon`` (SB3's epsilon-greedy), seeded per
+    episode.  A diagnosis, never the measure of a policy (evaluation is deterministic): where
+    it succeeds and the greedy policy times out, the network's Q-values lead to the goal and
+    what fails is the frozen policy's cycles, which a few random actions break.
+    """
+
+    name = 'explore'
+
+    def __init__(self, path: str | Path, epsilon: float, device: str = 'cpu') -> None:
+        """Load the checkpoint at ``path``; act at random with probability ``epsilon``."""
+        if not 0.0 <= epsilon <= 1.0:
+            raise EvaluationError(f'epsilon must be within [0, 1], got {epsilon!r}')
+        super().__init__(path, device)
+        self.epsilon = epsilon
+        self._rng = np.random.default_rng(0)
+
+    def begin_episode(self, seed: int) -> None:
+        """Reseed from the scenario seed (same seed -> same random actions)."""
+        self._rng = np.random.default_rng([11, seed])
+
+    def act(self, observation: np.ndarray) -> tuple[int, list[float] | None]:
+        """Take the greedy action, or with probability epsilon a random one (with the Q-values)."""
+        action, q_values = super().act(observation)
+        if self._rng.random() < self.epsilon:
+            action = int(self._rng.integers(len(q_values or ()) or 3))
+        return action, q_values
 
 
 def load_dqn(path: Path, device: str = 'cpu') -> Any:

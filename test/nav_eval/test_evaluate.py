@@ -17,7 +17,7 @@ from nav_eval import diagnose, evaluate
 from nav_eval.errors import EvaluationError
 from nav_gym.train_config import TrainConfig
 
-SETS = ['random_train', 'dqn_heldout', 'early_train']
+SETS = ['random_train', 'dqn_heldout', 'early_train', 'explore_heldout']
 
 
 @pytest.fixture(scope='module')
@@ -54,6 +54,29 @@ def test_plan_uses_the_first_checkpoint_after_step_zero_as_early(run_dir):
     assert by_name['dqn_heldout'].split == 'heldout'
 
 
+def test_the_exploring_diagnosis_is_the_greedy_policy_plus_seeded_random_actions(run_dir):
+    from nav_eval.policies import DQNPolicy, ExploringDQNPolicy
+    model = run_dir / 'final_model.zip'
+    obs = np.random.default_rng(0).integers(0, 256, (3, 84, 84), dtype=np.uint8)
+    never, always = ExploringDQNPolicy(model, 0.0), ExploringDQNPolicy(model, 1.0)
+    never.begin_episode(201)
+    assert [never.act(obs) for _ in range(5)] == [DQNPolicy(model).act(obs)] * 5
+
+    def actions(seed: int) -> list[int]:
+        always.begin_episode(seed)
+        return [always.act(obs)[0] for _ in range(30)]
+    assert actions(201) == actions(201) != actions(202)
+    assert set(actions(201)) == {0, 1, 2}
+    with pytest.raises(EvaluationError, match='epsilon'):
+        ExploringDQNPolicy(model, 1.5)
+    # a diagnosis on request, never part of the workshop's (deterministic) evaluation
+    assert not [n for n in evaluate.DEFAULT_SETS if n.startswith('explore')]
+    [planned] = evaluate.plan_sets(run_dir, ['explore_heldout'], (101,), (201,))
+    assert (planned.policy, planned.checkpoint) == ('explore', 'final_model.zip')
+    policy = evaluate.make_policy(planned.policy, run_dir, planned.checkpoint)
+    assert policy.epsilon == TrainConfig().exploration_final_eps
+
+
 def test_bad_requests_are_clear_errors(run_dir, tmp_path):
     with pytest.raises(EvaluationError, match='unknown evaluation set'):
         evaluate.plan_sets(run_dir, ['dqn_validation'], (1,), (2,))
@@ -85,9 +108,9 @@ def test_results_files_and_metrics(run_dir, evaluated):
             with np.load(out / 'traces' / entry['name'] /
                          f"seed_{episode['seed']}_frames.npz") as data:
                 assert data['obs'].shape == (episode['length'] + 1, 3, 84, 84)
-            has_q = entry['policy'] == 'dqn'
+            has_q = entry['policy'] in ('dqn', 'explore')
             assert all((s['q_values'] is not None) == has_q for s in trace['steps'])
-            if has_q:  # deterministic predict = argmax of the logged Q-values
+            if entry['policy'] == 'dqn':  # deterministic predict = argmax of the logged Q-values
                 assert all(s['action'] == int(np.argmax(s['q_values'])) for s in trace['steps'])
     assert (out / 'results.md').read_text().count('\n') == 2 + len(SETS)
     assert 'Random policy, training seeds (101–102)' in (out / 'results.md').read_text()
