@@ -13,6 +13,10 @@ are those of training.  Writes ``RUN_DIR/eval/``: ``results.json``, ``results.md
 rosbag2/MCAP bag per set under ``bags/<set>/``; with ``--video``, MP4 videos of the report's
 representative episodes under ``videos/`` (``nav_eval.video``).  The same evaluation twice gives
 identical files (wall-clock time is only printed).
+
+A diagnosis, on request only: ``explore_train`` / ``explore_heldout`` play the final model with
+training's final epsilon (``policies.ExploringDQNPolicy``), into another ``--out`` than
+``RUN_DIR/eval`` so that they never replace the evaluation.
 """
 
 from __future__ import annotations
@@ -201,6 +205,8 @@ def evaluate_set(env: NavigationEnv, run_dir: Path, eval_set: EvalSet, out: Path
                  record: bool) -> dict[str, Any]:
     """Run every seed of a set; write its traces (and bag); return its results entry."""
     policy = make_policy(eval_set.policy, run_dir, eval_set.checkpoint)
+    epsilon = getattr(policy, 'epsilon', None)
+    exploration = {} if epsilon is None else {'epsilon': epsilon}
     layout.trace_path(out, eval_set.name, 0).parent.mkdir(parents=True, exist_ok=True)
     recorder = _open_recorder(out / 'bags' / eval_set.name, env) if record else None
     scene_writer = None
@@ -214,7 +220,7 @@ def evaluate_set(env: NavigationEnv, run_dir: Path, eval_set: EvalSet, out: Path
             result, trace, frames = run_episode(env, policy, seed, eval_set.split, recorder)
             results.append(result)
             meta = {'set': eval_set.name, 'policy': eval_set.policy,
-                    'checkpoint': eval_set.checkpoint}
+                    'checkpoint': eval_set.checkpoint, **exploration}
             trace = {**meta, **trace}
             trace_file = layout.trace_path(out, eval_set.name, seed)
             trace_file.write_text(json.dumps(trace, indent=1))
@@ -231,7 +237,7 @@ def evaluate_set(env: NavigationEnv, run_dir: Path, eval_set: EvalSet, out: Path
             recorder.close()
     summary = metrics.summarize(results)
     return {'name': eval_set.name, 'label': eval_set.label, 'policy': eval_set.policy,
-            'checkpoint': eval_set.checkpoint, 'split': eval_set.split,
+            'checkpoint': eval_set.checkpoint, **exploration, 'split': eval_set.split,
             'seeds': list(eval_set.seeds), 'summary': summary.to_dict(),
             'episodes': [r.to_dict() for r in results]}
 
@@ -337,7 +343,8 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('run_dir', type=Path, help='training run directory')
     parser.add_argument('--sets', default=','.join(DEFAULT_SETS),
-                        help=f'comma-separated evaluation sets (default: all of {DEFAULT_SETS})')
+                        help=f'comma-separated evaluation sets (default: all of {DEFAULT_SETS}; '
+                        'a diagnosis, with --out elsewhere: explore_train, explore_heldout)')
     parser.add_argument('--train-seeds', default='101-110')
     parser.add_argument('--heldout-seeds', default='201-210')
     parser.add_argument('--checkpoint', default='final_model.zip',
@@ -357,7 +364,13 @@ def main(argv: list[str] | None = None) -> None:
                 args.run_dir / layout.EVAL).resolve():
             raise EvaluationError('--video reads the evaluation where the report does, in '
                                   'RUN_DIR/eval: leave out --out')
-        sets = plan_sets(args.run_dir, [s for s in args.sets.split(',') if s],
+        names = [s for s in args.sets.split(',') if s]
+        if any(SET_POLICIES.get(n.split('_')[0]) == 'explore' for n in names) and (
+                (args.out or args.run_dir / layout.EVAL).resolve()
+                == (args.run_dir / layout.EVAL).resolve()):
+            raise EvaluationError('the explore sets are a diagnosis, not the evaluation: write '
+                                  'them elsewhere with --out (e.g. --out RUN_DIR/eval_explore)')
+        sets = plan_sets(args.run_dir, names,
                          parse_seeds(args.train_seeds), parse_seeds(args.heldout_seeds),
                          args.checkpoint, args.early_checkpoint)
         start = time.perf_counter()

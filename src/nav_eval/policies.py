@@ -133,7 +133,7 @@ class ExploringDQNPolicy(DQNPolicy):
         """Take the greedy action, or with probability epsilon a random one (with the Q-values)."""
         action, q_values = super().act(observation)
         if self._rng.random() < self.epsilon:
-            action = int(self._rng.integers(len(q_values or ()) or 3))
+            action = int(self._rng.integers(self.model.action_space.n))
         return action, q_values
 
 

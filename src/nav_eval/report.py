@@ -180,11 +180,12 @@ def section_training(run: Run) -> list[str]:
 
 def checkpoint_name(entry: dict[str, Any]) -> str:
     """Name the policy of an evaluated set: its checkpoint file (with steps) or random."""
-    if entry.get('policy') != 'dqn':
+    if entry.get('policy') not in ('dqn', 'explore'):
         return 'random policy'
     name = Path(str(entry.get('checkpoint') or 'final_model.zip')).name
     match = CHECKPOINT_RE.search(name)
-    return f'{name} ({int(match.group(1)):,} steps)' if match else name
+    name = f'{name} ({int(match.group(1)):,} steps)' if match else name
+    return name if entry.get('policy') == 'dqn' else f"{name}, ε = {entry.get('epsilon')}"
 
 
 def summary_row(entry: dict[str, Any]) -> list[Any]:

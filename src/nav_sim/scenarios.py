@@ -184,6 +184,17 @@ def _sample_point(rng: np.random.Generator, layout: Layout, geometry: ArenaGeome
                         'lower min_start_goal_distance or num_obstacles')
 
 
+def goal_clearance(geometry: ArenaGeometry, config: SimConfig) -> float:
+    """Free distance a goal position keeps from walls and obstacles.
+
+    11 cm (the e-puck and the default 5 cm marker), more only for a bigger robot or a marker
+    over 10 cm in radius: the look of the goal leaves the scenarios alone, so a marker change
+    is measured on the same episodes.
+    """
+    return max(GOAL_CLEARANCE, geometry.robot_radius + GOAL_MARGIN,
+               config.goal_marker_radius + MARKER_GAP)
+
+
 def sample_scenario(seed: Any, split: str, banks: dict[str, tuple[Layout, ...]],
                     geometry: ArenaGeometry, config: SimConfig) -> Scenario:
     """Draw the scenario of (seed, split): layout, start pose and goal, all seeded."""
@@ -195,11 +206,8 @@ def sample_scenario(seed: Any, split: str, banks: dict[str, tuple[Layout, ...]],
     start_xy = _sample_point(rng, layout, geometry, geometry.robot_radius + START_CLEARANCE,
                              'start')
     yaw = float(rng.uniform(-math.pi, math.pi))
-    # a marker up to 10 cm in radius draws the same goals: the look of the goal leaves the
-    # scenarios alone, so a marker change is measured on the same episodes
-    goal_clearance = max(GOAL_CLEARANCE, geometry.robot_radius + GOAL_MARGIN,
-                         config.goal_marker_radius + MARKER_GAP)
-    goal = _sample_point(rng, layout, geometry, goal_clearance, 'goal', far_from=start_xy,
+    goal = _sample_point(rng, layout, geometry, goal_clearance(geometry, config), 'goal',
+                         far_from=start_xy,
                          min_distance=config.min_start_goal_distance)
     distance = math.hypot(goal[0] - start_xy[0], goal[1] - start_xy[1])
     return Scenario(seed, split, layout, (start_xy[0], start_xy[1], yaw), goal, distance)

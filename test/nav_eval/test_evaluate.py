@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nav_eval import diagnose, evaluate
+from nav_eval import diagnose, evaluate, report
 from nav_eval.errors import EvaluationError
 from nav_gym.train_config import TrainConfig
 
@@ -73,8 +73,25 @@ def test_the_exploring_diagnosis_is_the_greedy_policy_plus_seeded_random_actions
     assert not [n for n in evaluate.DEFAULT_SETS if n.startswith('explore')]
     [planned] = evaluate.plan_sets(run_dir, ['explore_heldout'], (101,), (201,))
     assert (planned.policy, planned.checkpoint) == ('explore', 'final_model.zip')
-    policy = evaluate.make_policy(planned.policy, run_dir, planned.checkpoint)
-    assert policy.epsilon == TrainConfig().exploration_final_eps
+
+
+def test_an_explore_set_acts_with_the_runs_own_epsilon_and_replays_exactly(run_dir, tmp_path):
+    run = tmp_path / 'run'
+    run.mkdir()
+    (run / 'config.yaml').write_text(
+        TrainConfig(max_episode_steps=15, exploration_final_eps=0.5).to_yaml())
+    (run / 'final_model.zip').write_bytes((run_dir / 'final_model.zip').read_bytes())
+    sets = evaluate.plan_sets(run, ['explore_heldout'], (101,), (201, 202))
+    [entry] = evaluate.evaluate(run, sets, record=False)['sets']
+    assert entry['epsilon'] == 0.5
+    trace = json.loads((run / 'eval' / 'traces' / 'explore_heldout' / 'seed_201.json')
+                       .read_text())
+    assert trace['epsilon'] == 0.5
+    # half of the actions are drawn at random: some differ from the greedy choice
+    assert any(s['action'] != int(np.argmax(s['q_values'])) for s in trace['steps'])
+    # ... and the same seed draws them again (the diagnosis re-run relies on it)
+    assert diagnose.rerun(run, trace) == [s['action'] for s in trace['steps']]
+    assert report.checkpoint_name(entry) == 'final_model.zip, ε = 0.5'
 
 
 def test_bad_requests_are_clear_errors(run_dir, tmp_path):
@@ -180,6 +197,8 @@ def test_evaluate_command_reports_errors_without_traceback(tmp_path, run_dir):
     assert 'cannot create the output directory /dev/null/x (Not a directory)' in line
     line = one_line_error(evaluate_command(str(run_dir), '--heldout-seeds', '5-1,207'))
     assert "bad seed range '5-1'" in line
+    line = one_line_error(evaluate_command(str(run_dir), '--sets', 'explore_heldout'))
+    assert 'a diagnosis, not the evaluation' in line and '--out' in line
     binary = tmp_path / 'binary'
     binary.mkdir()
     (binary / 'config.yaml').write_bytes(bytes(range(256)) * 4)

@@ -10,6 +10,7 @@ from nav_sim.scenarios import (
     MIN_LAYOUT_DIFFERENCE,
     clearance,
     distance_to_obstacle,
+    goal_clearance,
     layout_difference,
     sample_scenario,
 )
@@ -67,6 +68,15 @@ def test_the_goal_marker_never_touches_an_obstacle_and_up_to_10_cm_keeps_the_sce
             default_goals.append(default.goal)
     # the look of the goal leaves the episodes alone until the marker needs more room
     assert (goals == default_goals) is same_goals
+
+
+def test_the_goal_keeps_11_cm_free_as_it_always_has_for_the_e_puck(sim):
+    geometry = sim.world.geometry
+    # before markers could grow: max(robot radius, 5 cm marker) + 6 cm
+    assert goal_clearance(geometry, sim.config) == pytest.approx(
+        max(geometry.robot_radius, 0.05) + 0.06)
+    assert goal_clearance(geometry, SimConfig(goal_marker_radius=0.1)) == pytest.approx(0.11)
+    assert goal_clearance(geometry, SimConfig(goal_marker_radius=0.2)) == pytest.approx(0.21)
 
 
 def test_layout_obstacles_keep_a_gap_a_robot_fits_through(sim):
