@@ -360,19 +360,17 @@ def main(argv: list[str] | None = None) -> None:
     quiet_learner_threads()  # the policy's forward passes must not spin against the sim
 
     def body() -> int:
-        if args.video and args.out and args.out.resolve() != (
-                args.run_dir / layout.EVAL).resolve():
+        eval_dir = (args.run_dir / layout.EVAL).resolve()
+        writes_eval = args.out is None or args.out.resolve() == eval_dir
+        if args.video and not writes_eval:
             raise EvaluationError('--video reads the evaluation where the report does, in '
                                   'RUN_DIR/eval: leave out --out')
-        names = [s for s in args.sets.split(',') if s]
-        if any(SET_POLICIES.get(n.split('_')[0]) == 'explore' for n in names) and (
-                (args.out or args.run_dir / layout.EVAL).resolve()
-                == (args.run_dir / layout.EVAL).resolve()):
-            raise EvaluationError('the explore sets are a diagnosis, not the evaluation: write '
-                                  'them elsewhere with --out (e.g. --out RUN_DIR/eval_explore)')
-        sets = plan_sets(args.run_dir, names,
+        sets = plan_sets(args.run_dir, [s for s in args.sets.split(',') if s],
                          parse_seeds(args.train_seeds), parse_seeds(args.heldout_seeds),
                          args.checkpoint, args.early_checkpoint)
+        if writes_eval and any(s.policy == 'explore' for s in sets):
+            raise EvaluationError('the explore sets are a diagnosis, not the evaluation: write '
+                                  'them elsewhere with --out (e.g. --out RUN_DIR/eval_explore)')
         start = time.perf_counter()
         results = evaluate(args.run_dir, sets, args.out, record=not args.no_record,
                            live_port=args.live)
