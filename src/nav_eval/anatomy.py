@@ -16,7 +16,6 @@ actions) and ``seed_<n>_frames.npz`` (the observation before each decision, then
 
 from __future__ import annotations
 
-import json
 import statistics
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -82,13 +81,9 @@ def set_anatomy(eval_dir: Path, set_name: str, seeds: Iterable[int] | None = Non
     seeds leaves its traces in the same folder).  An episode whose trace or frames are missing
     or unreadable is left out.
     """
-    wanted = None if seeds is None else set(seeds)
     out = []
-    for path in layout.trace_files(eval_dir, set_name):
+    for path, trace in layout.read_traces(eval_dir, set_name, seeds):
         try:
-            trace = json.loads(path.read_text())
-            if wanted is not None and trace['seed'] not in wanted:
-                continue
             with np.load(layout.frames_path(path)) as data:
                 frames = data['obs']
             out.append(episode_anatomy(trace, frames))

@@ -52,7 +52,7 @@ RUN_MARKERS = ('summary.json', 'config.yaml', 'monitor.csv')
 HYPERPARAMETERS = ('learning_rate', 'buffer_size', 'learning_starts', 'batch_size', 'gamma',
                    'train_freq', 'gradient_steps', 'target_update_interval',
                    'exploration_fraction', 'exploration_initial_eps', 'exploration_final_eps',
-                   'seed', 'split', 'max_episode_steps', 'forward_speed', 'turn_rate',
+                   'double_q', 'seed', 'split', 'max_episode_steps', 'forward_speed', 'turn_rate',
                    'turn_speed',
                    'sim_params')
 EVAL_COLUMNS = ('Set', 'Policy', 'Split', 'Episodes', 'Success rate', 'Collision rate',

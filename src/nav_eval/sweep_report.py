@@ -3,7 +3,8 @@
 Reads only files (no ROS, no Ray): each trial is a run directory as ``nav-gym-train`` writes it
 with its ``eval/results.json`` (final model on the training and held-out seeds) and
 ``eval/curve/<steps>/results.json`` (held-out success per checkpoint) and, where they were
-kept, the held-out episodes' traces (the failure anatomy, :mod:`nav_eval.anatomy`); baselines are
+kept, the episodes' traces (the failure anatomy, :mod:`nav_eval.anatomy`, and the value
+calibration, :mod:`nav_eval.calibration`); baselines are
 ``baselines/<config>.json``.  Trials with the same training settings (all but the seed and
 bookkeeping such as the run name) form one configuration.  The same trials aggregated twice give
 identical files (fixed bootstrap seed, PNGs without a software/date stamp).
@@ -17,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from nav_eval import anatomy, stats
+from nav_eval import anatomy, calibration, stats
 from nav_eval.report_format import pct, table, to_html
 from nav_eval.sweep_figures import write_figures
 from nav_gym import run_dir as layout
@@ -31,9 +32,10 @@ FIGURES = (('intervals', 'Interval estimates per configuration: success'),
            ('profile', 'Performance profile of held-out success'),
            ('curve', 'Sample efficiency'), ('improvement', 'Probability of improvement'))
 ANATOMY = 'Failure anatomy (held-out)'
+CALIBRATION = 'Value calibration (held-out)'
 #: every section heading of Sweep.md (probability of improvement only with > 1 configuration)
 SECTIONS = ('Configurations: held-out success and collisions', *(c for _, c in FIGURES),
-            'Per seed', ANATOMY, 'Bank difficulty')
+            'Per seed', ANATOMY, CALIBRATION, 'Bank difficulty')
 RATES = ('success_rate', 'collision_rate', 'timeout_rate', 'mean_spl')
 
 
@@ -57,19 +59,24 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
     results = _read_json(run_dir / layout.EVAL / layout.RESULTS) or {}
     sets = {s['name']: s for s in results.get('sets', [])}
     final = {split: sets[name] for split, name in FINAL_SETS.items() if name in sets}
-    curve = {}
+    curve, curve_values = {}, {}
     for path in sorted((run_dir / layout.EVAL / 'curve').glob('*/results.json')):
         data = _read_json(path) or {}
         for s in data.get('sets', []):
             curve[int(path.parent.name)] = {'success_rate': s['summary']['success_rate'],
                                             'seeds': s['seeds']}
+            curve_values[int(path.parent.name)] = calibration.set_values(
+                path.parent, s['name'], config.gamma, s['seeds'])
     summary = _read_json(run_dir / layout.SUMMARY) or {}
     heldout = final.get('heldout')
     episodes = (anatomy.set_anatomy(run_dir / layout.EVAL, FINAL_SETS['heldout'],
                                     heldout['seeds']) if heldout else [])
+    values = (calibration.set_values(run_dir / layout.EVAL, FINAL_SETS['heldout'], config.gamma,
+                                     heldout['seeds']) if heldout else [])
     key = {k: v for k, v in vars(config).items() if k not in BOOKKEEPING}
     return {'name': run_dir.name, 'run_dir': run_dir, 'seed': config.seed, 'settings': key,
-            'final': final, 'curve': curve, 'anatomy': episodes,
+            'final': final, 'curve': curve, 'anatomy': episodes, 'values': values,
+            'curve_values': curve_values,
             'finished': (run_dir / layout.FINAL_MODEL).is_file(),
             'wall_clock_s': summary.get('wall_clock_total_s'),
             'steps': summary.get('num_timesteps')}
@@ -139,6 +146,29 @@ def anatomy_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
         for seed, episodes in pools + ([('all', pooled)] if len(pools) > 1 else []):
             for outcome, figures in anatomy.summarise(episodes).items():
                 rows.append({'config': config, 'seed': seed, 'outcome': outcome, **figures})
+    return rows
+
+
+def calibration_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
+    """Return the held-out value calibration per configuration and seed, then pooled ('all').
+
+    The final model's rows have ``steps`` None; then, pooled over the seeds, one row per
+    checkpoint of the sample-efficiency curve whose traces were kept.
+    """
+    rows = []
+    for config, members in groups.items():
+        pools = [(t['seed'], t['values']) for t in members if t['values']]
+        if len(pools) > 1:
+            pools.append(('all', [e for _, episodes in pools for e in episodes]))
+        for seed, episodes in pools:
+            rows.append({'config': config, 'seed': seed, 'steps': None,
+                         **calibration.summarise(episodes)})
+        steps = sorted({s for t in members for s, episodes in t['curve_values'].items()
+                        if episodes})
+        for step in steps:
+            pooled = [e for t in members for e in t['curve_values'].get(step, [])]
+            rows.append({'config': config, 'seed': 'all', 'steps': step,
+                         **calibration.summarise(pooled)})
     return rows
 
 
@@ -234,6 +264,7 @@ def _markdown(folder: Path, data: dict[str, Any], figures: dict[str, str]) -> st
         rows.append(row)
     lines += table(head, rows)
     lines += _anatomy_markdown(data['anatomy'])
+    lines += _calibration_markdown(data['calibration'])
     lines += ['## Bank difficulty', '',
               'Success on the training bank and the held-out bank, each with its CI over '
               'scenarios: the random policy, the image-only servo (`nav_eval.policies.'
@@ -276,6 +307,30 @@ def _anatomy_markdown(rows: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
+def _calibration_markdown(rows: list[dict[str, Any]]) -> list[str]:
+    lines = [f'## {CALIBRATION}', '']
+    if not rows:
+        return lines + ['No held-out episode that ended in a goal or a collision was traced '
+                        'with its Q-values (`eval/traces/dqn_heldout`).', '']
+    lines += ['The value Q(s, a) of each action the model took against the discounted return '
+              "that followed it (the run's gamma), over the held-out episodes that ended in a "
+              "goal or a collision (a time-out's return after the limit is unknown). Q - return "
+              '> 0 is overestimation; *near* is the final approach (decisions closer than '
+              f'{calibration.NEAR_GOAL:g} m to the goal). Rows with a step count are the '
+              'checkpoints of the sample-efficiency curve, seeds pooled '
+              '(`nav_eval.calibration`).', '']
+
+    def number(value: Any) -> str:
+        return '–' if value is None else f'{value:+.2f}'
+
+    body = [[r['config'], r['seed'], 'final' if r['steps'] is None else r['steps'],
+             r['episodes'], r['decisions'], f"{r['q']:.2f}", f"{r['return']:.2f}",
+             number(r['overestimate']), number(r['near']), number(r['far'])] for r in rows]
+    lines += table(['Configuration', 'Seed', 'Model', 'Episodes', 'Decisions', 'Mean Q',
+                    'Mean return', 'Q - return', 'Near the goal', 'Farther'], body)
+    return lines
+
+
 def _jsonable(value: Any) -> Any:
     if isinstance(value, dict):
         return {str(k): _jsonable(v) for k, v in value.items()}
@@ -313,7 +368,7 @@ def write_sweep_report(folder: Path) -> Path:
         'bank_verdict': stats.bank_verdict([r for r in banks]), 'missing': missing,
         'failed': _read_json(folder / 'failed.json') or {},
         'settings': {c: m[0]['settings'] for c, m in groups.items()},
-        'anatomy': anatomy_rows(groups)}
+        'anatomy': anatomy_rows(groups), 'calibration': calibration_rows(groups)}
     curves = curve_scores(groups)
     success = {c: stats.score_matrix([t['final']['heldout']['summary']['success_rate']
                                       for t in m if 'heldout' in t['final']])

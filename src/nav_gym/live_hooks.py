@@ -21,17 +21,22 @@ def add_live_argument(parser: argparse.ArgumentParser) -> None:
                         'config/foxglove/visnav.json)')
 
 
-def timed_dqn(timing: Any | None) -> type:
+def timed_dqn(timing: Any | None, double_q: bool = False) -> type:
     """Return a DQN class that counts its gradient steps and predictions into ``timing``.
 
     ``timing`` is the env's step budget (``env.timing``): SB3's ``train`` (gradient steps) and
     ``predict`` calls become the learner's share of every env step.  A subclass, not wrappers
     set on the model, so the timing never becomes model state that saving would pickle; a
     checkpoint of it loads with ``DQN.load`` as any other.  Without ``timing``: SB3's DQN.
+    ``double_q``: :class:`nav_gym.double_dqn.DoubleDQN` instead of SB3's DQN (a diagnosis,
+    not the workshop's learner).
     """
     import time
 
-    from stable_baselines3 import DQN
+    if double_q:
+        from nav_gym.double_dqn import DoubleDQN as DQN
+    else:
+        from stable_baselines3 import DQN
     if timing is None:
         return DQN
 

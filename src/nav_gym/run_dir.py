@@ -14,6 +14,8 @@ for checkpoint names.
 from __future__ import annotations
 
 import csv
+import json
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -70,6 +72,24 @@ def frames_path(trace: Path) -> Path:
 def trace_files(eval_dir: Path, set_name: str) -> list[Path]:
     """Return the trace files of one evaluated set (any order)."""
     return list((Path(eval_dir) / TRACES / set_name).glob('seed_*.json'))
+
+
+def read_traces(eval_dir: Path, set_name: str, seeds: Iterable[int] | None = None,
+                ) -> Iterator[tuple[Path, dict[str, Any]]]:
+    """Yield ``(path, trace)`` for the traced episodes of one evaluated set (any order).
+
+    ``seeds``: only these (an earlier evaluation of other seeds leaves its traces in the same
+    folder).  A trace that cannot be read or parsed, or names no seed, is skipped.
+    """
+    wanted = None if seeds is None else set(seeds)
+    for path in trace_files(eval_dir, set_name):
+        try:
+            trace = json.loads(path.read_text())
+            seed = trace['seed']
+        except (OSError, ValueError, KeyError, TypeError):
+            continue
+        if wanted is None or seed in wanted:
+            yield path, trace
 
 
 def read_monitor(path: Path) -> dict[str, list[str]]:

@@ -131,10 +131,10 @@ def delete_replay_buffer(run_dir: Path) -> None:
     (folder / REPLAY_BUFFER).unlink(missing_ok=True)
 
 
-def load_model(path: Path, env: Any, device: str) -> Any:
+def load_model(path: Path, env: Any, device: str, double_q: bool = False) -> Any:
     """Load a DQN checkpoint (timed as :func:`build_model`'s) or raise CheckpointError."""
     try:
-        return timed_dqn(env.unwrapped.timing if env is not None else None).load(
+        return timed_dqn(env.unwrapped.timing if env is not None else None, double_q).load(
             path, env=env, device=device)
     except (zipfile.BadZipFile, EOFError, KeyError, ValueError, RuntimeError, OSError,
             AssertionError) as exc:
@@ -189,14 +189,14 @@ def build_model(config: TrainConfig, run_dir: Path, env: Any, resume: bool) -> A
     """Return a new DQN, or the newest checkpoint's with its replay buffer when it has one."""
     if not resume:
         # the learner's share of every env step is counted into the env's step budget
-        return timed_dqn(env.unwrapped.timing)('CnnPolicy', env,
+        return timed_dqn(env.unwrapped.timing, config.double_q)('CnnPolicy', env,
                                                tensorboard_log=str(run_dir / 'tb'), verbose=0,
                                                **config.dqn_kwargs())
     found = checkpoints(run_dir)
     if not found:
         raise CheckpointError(f'no checkpoint in {run_dir / layout.CHECKPOINTS} to resume from')
     steps, path = found[-1]
-    model = load_model(path, env, config.device)
+    model = load_model(path, env, config.device, config.double_q)
     model.tensorboard_log = str(run_dir / 'tb')
     buffer = run_dir / layout.CHECKPOINTS / REPLAY_BUFFER
     buffer_step = _buffer_step(run_dir / layout.CHECKPOINTS / REPLAY_BUFFER_STEP)

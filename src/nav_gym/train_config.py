@@ -48,6 +48,8 @@ class TrainConfig:
     exploration_initial_eps: float = _f(1.0, 'initial epsilon (SB3 default)')
     exploration_final_eps: float = _f(0.05, 'final epsilon')
     seed: int = _f(9, 'seed of DQN, the env and its scenario sequence')
+    double_q: bool = _f(False, "Double DQN targets instead of the workshop's DQN (a diagnosis of "
+                        'overestimation, not the workshop learner; see nav_gym.double_dqn)')
     checkpoint_freq: int = _f(10_000, 'steps between checkpoints (all are kept)')
     save_replay_buffer: bool = _f(True, 'save the replay buffer with checkpoints (for --resume)')
     keep_replay_buffer: bool = _f(False, 'keep checkpoints/replay_buffer.pkl when the run '
