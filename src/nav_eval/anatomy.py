@@ -81,8 +81,17 @@ def set_anatomy(eval_dir: Path, set_name: str, seeds: Iterable[int] | None = Non
     seeds leaves its traces in the same folder).  An episode whose trace or frames are missing
     or unreadable is left out.
     """
+    return traces_anatomy(layout.read_traces(eval_dir, set_name, seeds))
+
+
+def traces_anatomy(traces: Iterable[tuple[Path, dict[str, Any]]]) -> list[EpisodeAnatomy]:
+    """Describe episodes from their ``(path, trace)`` pairs (:func:`nav_gym.run_dir.read_traces`).
+
+    The frames are read beside each trace; an episode whose frames are missing or unreadable,
+    or disagree with its trace, is left out.
+    """
     out = []
-    for path, trace in layout.read_traces(eval_dir, set_name, seeds):
+    for path, trace in traces:
         try:
             with np.load(layout.frames_path(path)) as data:
                 frames = data['obs']

@@ -58,7 +58,10 @@ def episode_values(trace: dict[str, Any], gamma: float) -> EpisodeValues | None:
     if trace['outcome'] not in TERMINATED or not steps or \
             any(s.get('q_values') is None for s in steps):
         return None
-    q = np.array([float(s['q_values'][int(s['action'])]) for s in steps])
+    actions = [int(s['action']) for s in steps]
+    if any(not 0 <= a < len(s['q_values']) for a, s in zip(actions, steps, strict=True)):
+        raise ValueError(f"seed {trace.get('seed')}: an action without its Q-value")
+    q = np.array([float(s['q_values'][a]) for a, s in zip(actions, steps, strict=True)])
     before = [float(trace['scenario']['initial_distance'])] + \
         [float(s['distance']) for s in steps[:-1]]
     return EpisodeValues(seed=int(trace['seed']), outcome=trace['outcome'], q=q,
@@ -73,11 +76,20 @@ def set_values(eval_dir: Path, set_name: str, gamma: float,
     ``seeds``: only these (an earlier evaluation of other seeds leaves its traces in the same
     folder); an unreadable trace is left out.
     """
+    return traces_values(layout.read_traces(eval_dir, set_name, seeds), gamma)
+
+
+def traces_values(traces: Iterable[tuple[Path, dict[str, Any]]], gamma: float,
+                  ) -> list[EpisodeValues]:
+    """Describe the terminated episodes of ``(path, trace)`` pairs, by seed.
+
+    The pairs are :func:`nav_gym.run_dir.read_traces`'s; a malformed trace is left out.
+    """
     out = []
-    for _, trace in layout.read_traces(eval_dir, set_name, seeds):
+    for _, trace in traces:
         try:
             values = episode_values(trace, gamma)
-        except (ValueError, KeyError, IndexError, TypeError):
+        except (ValueError, KeyError, IndexError, TypeError, AttributeError):
             continue
         if values is not None:
             out.append(values)

@@ -69,13 +69,12 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
                 path.parent, s['name'], config.gamma, s['seeds'])
     summary = _read_json(run_dir / layout.SUMMARY) or {}
     heldout = final.get('heldout')
-    episodes = (anatomy.set_anatomy(run_dir / layout.EVAL, FINAL_SETS['heldout'],
-                                    heldout['seeds']) if heldout else [])
-    values = (calibration.set_values(run_dir / layout.EVAL, FINAL_SETS['heldout'], config.gamma,
-                                     heldout['seeds']) if heldout else [])
+    traces = (list(layout.read_traces(run_dir / layout.EVAL, FINAL_SETS['heldout'],
+                                      heldout['seeds'])) if heldout else [])
     key = {k: v for k, v in vars(config).items() if k not in BOOKKEEPING}
     return {'name': run_dir.name, 'run_dir': run_dir, 'seed': config.seed, 'settings': key,
-            'final': final, 'curve': curve, 'anatomy': episodes, 'values': values,
+            'final': final, 'curve': curve, 'anatomy': anatomy.traces_anatomy(traces),
+            'values': calibration.traces_values(traces, config.gamma),
             'curve_values': curve_values,
             'finished': (run_dir / layout.FINAL_MODEL).is_file(),
             'wall_clock_s': summary.get('wall_clock_total_s'),
@@ -150,24 +149,32 @@ def anatomy_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
 
 
 def calibration_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
-    """Return the held-out value calibration per configuration and seed, then pooled ('all').
+    """Return the held-out value calibration per configuration and seed, then pooled.
 
-    The final model's rows have ``steps`` None; then, pooled over the seeds, one row per
-    checkpoint of the sample-efficiency curve whose traces were kept.
+    The final model's rows have ``steps`` None: one per seed with traces, then (with more than
+    one) their pool; then one pooled row per checkpoint of the sample-efficiency curve whose
+    traces were kept.  A pool's ``seed`` is 'all' when every seed of the configuration is in
+    it, else the seed or seeds that are.
     """
+    def pool(found: list[tuple[int, list]], members: list[dict]) -> tuple[Any, list]:
+        seeds = [seed for seed, _ in found]
+        label = 'all' if len(seeds) == len(members) else \
+            seeds[0] if len(seeds) == 1 else ', '.join(map(str, seeds))
+        return label, [e for _, episodes in found for e in episodes]
+
     rows = []
     for config, members in groups.items():
-        pools = [(t['seed'], t['values']) for t in members if t['values']]
-        if len(pools) > 1:
-            pools.append(('all', [e for _, episodes in pools for e in episodes]))
+        found = [(t['seed'], t['values']) for t in members if t['values']]
+        pools = found + ([pool(found, members)] if len(found) > 1 else [])
         for seed, episodes in pools:
             rows.append({'config': config, 'seed': seed, 'steps': None,
                          **calibration.summarise(episodes)})
         steps = sorted({s for t in members for s, episodes in t['curve_values'].items()
                         if episodes})
         for step in steps:
-            pooled = [e for t in members for e in t['curve_values'].get(step, [])]
-            rows.append({'config': config, 'seed': 'all', 'steps': step,
+            label, pooled = pool([(t['seed'], t['curve_values'][step]) for t in members
+                                  if t['curve_values'].get(step)], members)
+            rows.append({'config': config, 'seed': label, 'steps': step,
                          **calibration.summarise(pooled)})
     return rows
 

@@ -27,9 +27,9 @@ def timed_dqn(timing: Any | None, double_q: bool = False) -> type:
     ``timing`` is the env's step budget (``env.timing``): SB3's ``train`` (gradient steps) and
     ``predict`` calls become the learner's share of every env step.  A subclass, not wrappers
     set on the model, so the timing never becomes model state that saving would pickle; a
-    checkpoint of it loads with ``DQN.load`` as any other.  Without ``timing``: SB3's DQN.
-    ``double_q``: :class:`nav_gym.double_dqn.DoubleDQN` instead of SB3's DQN (a diagnosis,
-    not the workshop's learner).
+    checkpoint of it loads with ``DQN.load`` as any other.  The learner is SB3's DQN, or with
+    ``double_q`` :class:`nav_gym.double_dqn.DoubleDQN` (a diagnosis, not the workshop's
+    learner); without ``timing`` that class itself is returned, untimed.
     """
     import time
 
@@ -41,7 +41,7 @@ def timed_dqn(timing: Any | None, double_q: bool = False) -> type:
         return DQN
 
     class TimedDQN(DQN):
-        """SB3 DQN whose ``train`` and ``predict`` calls are timed."""
+        """The learner (SB3's DQN or Double DQN) with its ``train`` and ``predict`` timed."""
 
         def train(self, *args: Any, **kwargs: Any) -> Any:
             """Run SB3's gradient steps, timed as ``gradient_step``."""

@@ -85,11 +85,11 @@ def read_traces(eval_dir: Path, set_name: str, seeds: Iterable[int] | None = Non
     for path in trace_files(eval_dir, set_name):
         try:
             trace = json.loads(path.read_text())
-            seed = trace['seed']
+            if wanted is not None and trace['seed'] not in wanted:
+                continue
         except (OSError, ValueError, KeyError, TypeError):
             continue
-        if wanted is None or seed in wanted:
-            yield path, trace
+        yield path, trace
 
 
 def read_monitor(path: Path) -> dict[str, list[str]]:

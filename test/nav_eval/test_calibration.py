@@ -62,7 +62,33 @@ def test_a_set_is_read_from_its_traces(tmp_path):
         path.write_text(json.dumps(trace(seed, outcome, [(1, [0.0, 3.0, 0.0], 1.0, 0.5)])))
     bad = layout.trace_path(tmp_path, 'dqn_heldout', 204)
     bad.write_text('{"seed": 204, "outcome": "success"')  # cut short: left out
+    layout.trace_path(tmp_path, 'dqn_heldout', 205).write_text('[205]')  # not a trace
+    layout.trace_path(tmp_path, 'dqn_heldout', 206).write_text('{"seed": [206]}')  # nor this
+    wrong = trace(207, 'success', [(-1, [0.0, 3.0, 0.0], 1.0, 0.5)])  # no such action
+    layout.trace_path(tmp_path, 'dqn_heldout', 207).write_text(json.dumps(wrong))
     episodes = calibration.set_values(tmp_path, 'dqn_heldout', gamma=0.99)
     assert [(e.seed, e.outcome) for e in episodes] == [(201, 'success'), (203, 'collision')]
     assert [e.seed for e in calibration.set_values(tmp_path, 'dqn_heldout', 0.99, [203])] == [203]
     assert calibration.set_values(tmp_path, 'dqn_train', 0.99) == []
+
+
+def test_sweep_rows_per_seed_then_pooled_named_by_their_seeds():
+    from nav_eval.sweep_report import _calibration_markdown, calibration_rows
+
+    one = calibration.EpisodeValues(1, 'success', q=np.array([6.0]), returns=np.array([4.0]),
+                                    distance=np.array([0.5]))
+    two = calibration.EpisodeValues(2, 'collision', q=np.array([2.0]),
+                                    returns=np.array([-1.0]), distance=np.array([0.1]))
+    members = [{'seed': 1, 'values': [one], 'curve_values': {10000: [one], 20000: [one]}},
+               {'seed': 2, 'values': [two], 'curve_values': {10000: [two], 20000: []}},
+               {'seed': 3, 'values': [], 'curve_values': {}}]  # kept no traces
+    rows = calibration_rows({'c': members})
+    assert [(r['seed'], r['steps']) for r in rows] == [
+        (1, None), (2, None), ('1, 2', None), ('1, 2', 10000), (1, 20000)]
+    assert rows[2]['overestimate'] == pytest.approx(2.5)  # (6 - 4 + 2 + 1) / 2
+    rows = calibration_rows({'c': members[:2]})  # every seed in the pool: 'all'
+    assert [r['seed'] for r in rows] == [1, 2, 'all', 'all', 1]
+    text = '\n'.join(_calibration_markdown(rows))
+    assert '| c | all | final | 2 | 2 | 4.00 | 1.50 | +2.50 | +3.00 | +2.00 |' in text
+    assert '| c | 1 | 20000 | 1 | 1 | 6.00 | 4.00 | +2.00 | – | +2.00 |' in text
+    assert 'No held-out episode' in '\n'.join(_calibration_markdown([]))
