@@ -4,11 +4,13 @@ A deterministic policy in a deterministic sim gets, from every decision of an ep
 (goal or collision), a return known exactly: the discounted sum of the rewards that followed, with
 the run's ``gamma``.  A Q-learning network's value of the action it took estimates that return; how
 far above it the value sits is the learner's *overestimation*.  DQN's target takes the maximum over
-noisy estimates, so where the actions' true values are close (a turn now or a step later near the
-goal, the left/right reversals of :mod:`nav_eval.anatomy`) the estimates drift up, and which action
-looks best is decided by the estimation error rather than by the task.
+noisy estimates, so where the actions' true values are close (a turn now or a step forward, the
+left/right reversals of :mod:`nav_eval.anatomy`) the estimates drift up, and which action looks
+best is decided by the estimation error rather than by the task.
 
-Time-outs are left out: a truncated episode's return after the limit is unknown.  Reads the traces
+A time-out's return after the limit is unknown, so the comparison with returns uses the episodes
+that ended; a second measure needs no returns and takes every decision: the share whose Q-value
+is above :func:`return_bound`, the most any episode can return from there.  Reads the traces
 ``nav-eval-evaluate`` writes (``RUN/eval/traces/<set>/seed_<n>.json``: each decision's Q-values,
 reward and distance to the goal after it, and the scenario's initial distance).
 """
@@ -24,21 +26,21 @@ import numpy as np
 
 from nav_gym import run_dir as layout
 
-#: decisions taken closer to the goal than this (m) form the "near" band: the final approach,
-#: where a turn and a step forward differ by one decision's discount
+#: decisions taken closer to the goal than this (m) form the "near" band: the final approach
 NEAR_GOAL = 0.25
 TERMINATED = ('success', 'collision')
 
 
 @dataclass(frozen=True)
 class EpisodeValues:
-    """One terminated episode: per decision, the value of the action taken and its return."""
+    """One evaluated episode: per decision, the value of the action taken and what bounds it."""
 
     seed: int
     outcome: str
     q: np.ndarray  # Q(s_t, a_t) of each decision
-    returns: np.ndarray  # discounted return from each decision to the episode's end
+    returns: np.ndarray | None  # discounted return from each decision (None: a time-out)
     distance: np.ndarray  # distance to the goal (m) when each decision was taken
+    bound: np.ndarray  # the most any episode can return from each decision (return_bound)
 
 
 def discounted_returns(rewards: Iterable[float], gamma: float) -> np.ndarray:
@@ -52,43 +54,61 @@ def discounted_returns(rewards: Iterable[float], gamma: float) -> np.ndarray:
     return out
 
 
-def episode_values(trace: dict[str, Any], gamma: float) -> EpisodeValues | None:
-    """Describe one traced episode; None for a time-out or a policy without Q-values."""
+def return_bound(distance: np.ndarray, reward: Any) -> np.ndarray:
+    """Return the most any episode can return from decisions ``distance`` m from the goal.
+
+    ``reward`` has the run's reward weights and ``gamma`` (a TrainConfig).  Progress pays
+    ``progress_weight`` per metre, and its discounted sum over any path is at most the distance
+    times the weight (summed by parts: the distance never goes below 0); the goal pays at most
+    once; negative step costs and collision penalties only lower a return, positive ones are
+    added at their most (every step's for ever, one collision).
+    """
+    most = max(reward.goal_reward, 0.0) + max(reward.collision_penalty, 0.0) + \
+        max(reward.step_penalty, 0.0) / (1.0 - reward.gamma)
+    return most + max(reward.progress_weight, 0.0) * np.asarray(distance, dtype=float)
+
+
+def episode_values(trace: dict[str, Any], reward: Any) -> EpisodeValues | None:
+    """Describe one traced episode; None for a policy without Q-values.
+
+    ``reward``: the run's reward weights and ``gamma`` (a TrainConfig).  A time-out has no
+    returns (its return after the limit is unknown).
+    """
     steps = trace['steps']
-    if trace['outcome'] not in TERMINATED or not steps or \
-            any(s.get('q_values') is None for s in steps):
+    if not steps or any(s.get('q_values') is None for s in steps):
         return None
     actions = [int(s['action']) for s in steps]
     if any(not 0 <= a < len(s['q_values']) for a, s in zip(actions, steps, strict=True)):
         raise ValueError(f"seed {trace.get('seed')}: an action without its Q-value")
     q = np.array([float(s['q_values'][a]) for a, s in zip(actions, steps, strict=True)])
-    before = [float(trace['scenario']['initial_distance'])] + \
-        [float(s['distance']) for s in steps[:-1]]
+    before = np.array([float(trace['scenario']['initial_distance'])] +
+                      [float(s['distance']) for s in steps[:-1]])
+    returns = (discounted_returns((s['reward'] for s in steps), reward.gamma)
+               if trace['outcome'] in TERMINATED else None)
     return EpisodeValues(seed=int(trace['seed']), outcome=trace['outcome'], q=q,
-                         returns=discounted_returns((s['reward'] for s in steps), gamma),
-                         distance=np.array(before))
+                         returns=returns, distance=before, bound=return_bound(before, reward))
 
 
-def set_values(eval_dir: Path, set_name: str, gamma: float,
+def set_values(eval_dir: Path, set_name: str, reward: Any,
                seeds: Iterable[int] | None = None) -> list[EpisodeValues]:
-    """Read the terminated episodes of one evaluated set ([] without traces).
+    """Read the episodes of one evaluated set ([] without traces).
 
-    ``seeds``: only these (an earlier evaluation of other seeds leaves its traces in the same
-    folder); an unreadable trace is left out.
+    ``reward``: the run's TrainConfig; ``seeds``: only these (an earlier evaluation of other
+    seeds leaves its traces in the same folder); an unreadable trace is left out.
     """
-    return traces_values(layout.read_traces(eval_dir, set_name, seeds), gamma)
+    return traces_values(layout.read_traces(eval_dir, set_name, seeds), reward)
 
 
-def traces_values(traces: Iterable[tuple[Path, dict[str, Any]]], gamma: float,
+def traces_values(traces: Iterable[tuple[Path, dict[str, Any]]], reward: Any,
                   ) -> list[EpisodeValues]:
-    """Describe the terminated episodes of ``(path, trace)`` pairs, by seed.
+    """Describe the episodes of ``(path, trace)`` pairs, by seed.
 
     The pairs are :func:`nav_gym.run_dir.read_traces`'s; a malformed trace is left out.
     """
     out = []
     for _, trace in traces:
         try:
-            values = episode_values(trace, gamma)
+            values = episode_values(trace, reward)
         except (ValueError, KeyError, IndexError, TypeError, AttributeError):
             continue
         if values is not None:
@@ -97,22 +117,29 @@ def traces_values(traces: Iterable[tuple[Path, dict[str, Any]]], gamma: float,
 
 
 def summarise(episodes: Iterable[EpisodeValues]) -> dict[str, Any] | None:
-    """Sum terminated episodes up; None without any.
+    """Sum episodes up; None without any.
 
-    ``episodes`` and ``decisions`` used; means over decisions of ``q`` (the value of the action
-    taken) and ``return``; ``overestimate`` = mean(Q - return), also ``near`` the goal (closer
-    than :data:`NEAR_GOAL`) and ``far`` from it (None where a band has no decision).
+    Over the episodes that ended (goal or collision): ``episodes`` and ``decisions``; means over
+    their decisions of ``q`` (the value of the action taken) and ``return``; ``overestimate`` =
+    mean(Q - return), also ``near`` the goal (closer than :data:`NEAR_GOAL`) and ``far`` from
+    it (None where there is no such decision).  Over every decision, time-outs included:
+    ``all_decisions`` and ``above_bound``, the share whose Q is above :func:`return_bound`.
     """
     episodes = list(episodes)
     if not episodes:
         return None
-    q = np.concatenate([e.q for e in episodes])
-    g = np.concatenate([e.returns for e in episodes])
-    near = np.concatenate([e.distance for e in episodes]) < NEAR_GOAL
+    ended = [e for e in episodes if e.returns is not None]
 
     def mean(values: np.ndarray) -> float | None:
         return float(values.mean()) if values.size else None
 
-    return {'episodes': len(episodes), 'decisions': int(q.size), 'q': mean(q),
-            'return': mean(g), 'overestimate': mean(q - g), 'near': mean((q - g)[near]),
-            'far': mean((q - g)[~near])}
+    def joined(name: str, group: list[EpisodeValues]) -> np.ndarray:
+        return np.concatenate([getattr(e, name) for e in group]) if group else np.zeros(0)
+
+    q, g = joined('q', ended), joined('returns', ended)
+    near = joined('distance', ended) < NEAR_GOAL
+    above = joined('q', episodes) > joined('bound', episodes)
+    return {'episodes': len(ended), 'decisions': int(q.size), 'q': mean(q), 'return': mean(g),
+            'overestimate': mean(q - g), 'near': mean((q - g)[near]),
+            'far': mean((q - g)[~near]), 'all_decisions': int(above.size),
+            'above_bound': mean(above.astype(float))}

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from nav_eval import anatomy, calibration, stats
-from nav_eval.report_format import pct, table, to_html
+from nav_eval.report_format import num, pct, table, to_html
 from nav_eval.sweep_figures import write_figures
 from nav_gym import run_dir as layout
 from nav_gym.train_config import TrainConfig
@@ -66,7 +66,7 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
             curve[int(path.parent.name)] = {'success_rate': s['summary']['success_rate'],
                                             'seeds': s['seeds']}
             curve_values[int(path.parent.name)] = calibration.set_values(
-                path.parent, s['name'], config.gamma, s['seeds'])
+                path.parent, s['name'], config, s['seeds'])
     summary = _read_json(run_dir / layout.SUMMARY) or {}
     heldout = final.get('heldout')
     traces = (list(layout.read_traces(run_dir / layout.EVAL, FINAL_SETS['heldout'],
@@ -74,7 +74,7 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
     key = {k: v for k, v in vars(config).items() if k not in BOOKKEEPING}
     return {'name': run_dir.name, 'run_dir': run_dir, 'seed': config.seed, 'settings': key,
             'final': final, 'curve': curve, 'anatomy': anatomy.traces_anatomy(traces),
-            'values': calibration.traces_values(traces, config.gamma),
+            'values': calibration.traces_values(traces, config),
             'curve_values': curve_values,
             'finished': (run_dir / layout.FINAL_MODEL).is_file(),
             'wall_clock_s': summary.get('wall_clock_total_s'),
@@ -317,24 +317,28 @@ def _anatomy_markdown(rows: list[dict[str, Any]]) -> list[str]:
 def _calibration_markdown(rows: list[dict[str, Any]]) -> list[str]:
     lines = [f'## {CALIBRATION}', '']
     if not rows:
-        return lines + ['No held-out episode that ended in a goal or a collision was traced '
-                        'with its Q-values (`eval/traces/dqn_heldout`).', '']
+        return lines + ['No held-out episode was traced with its Q-values '
+                        '(`eval/traces/dqn_heldout`).', '']
     lines += ['The value Q(s, a) of each action the model took against the discounted return '
               "that followed it (the run's gamma), over the held-out episodes that ended in a "
               "goal or a collision (a time-out's return after the limit is unknown). Q - return "
               '> 0 is overestimation; *near* is the final approach (decisions closer than '
-              f'{calibration.NEAR_GOAL:g} m to the goal). Rows with a step count are the '
-              'checkpoints of the sample-efficiency curve, seeds pooled '
-              '(`nav_eval.calibration`).', '']
+              f'{calibration.NEAR_GOAL:g} m to the goal). *Above any return* needs no returns '
+              'and takes every decision, time-outs included: the share whose Q is above the '
+              'most any episode can return from there (the goal bonus plus the progress reward '
+              'of the whole distance to the goal). Rows with a step count are the checkpoints '
+              'of the sample-efficiency curve, seeds pooled (`nav_eval.calibration`).', '']
 
-    def number(value: Any) -> str:
+    def signed(value: Any) -> str:
         return '–' if value is None else f'{value:+.2f}'
 
     body = [[r['config'], r['seed'], 'final' if r['steps'] is None else r['steps'],
-             r['episodes'], r['decisions'], f"{r['q']:.2f}", f"{r['return']:.2f}",
-             number(r['overestimate']), number(r['near']), number(r['far'])] for r in rows]
-    lines += table(['Configuration', 'Seed', 'Model', 'Episodes', 'Decisions', 'Mean Q',
-                    'Mean return', 'Q - return', 'Near the goal', 'Farther'], body)
+             r['episodes'], r['decisions'], num(r['q']), num(r['return']),
+             signed(r['overestimate']), signed(r['near']), signed(r['far']),
+             f"{pct(r['above_bound'])} of {r['all_decisions']}"] for r in rows]
+    lines += table(['Configuration', 'Seed', 'Model', 'Ended episodes', 'Their decisions',
+                    'Mean Q', 'Mean return', 'Q - return', 'Near the goal', 'Farther',
+                    'Q above any return'], body)
     return lines
 
 
