@@ -35,6 +35,7 @@ from nav_sim.errors import FrameSyncError, ScenarioError, SimConflictError, SimU
 
 POLL_S = 0.25
 RESET_RETRY_S = 1.0
+RESEND_S = 2.0  # a service request with no answer by then is sent again (see _call)
 NAMES_WAIT_S = 3.0  # for the names of conflicting sims still being discovered
 #: how pybind11 reports an exception raised while it converted a call's arguments
 PYBIND11_CONVERSION_ERROR = 'Unable to convert call argument'
@@ -227,12 +228,21 @@ class SimClient:
             raise SimUnavailableError(
                 f'service {client.srv_name} of nav_sim in {self.where} not available within '
                 f'{self.timeout} s; start the sim with `ros2 run nav_sim sim_node`')
-        future = client.call_async(request)
-        if not self.spin_until(future.done, self.timeout):
+        # A service's response is lost if it is sent before the server has matched this
+        # client's response reader (Fast DDS waits 100 ms for that, then drops it), which
+        # discovery under load can outlast.  The sim's services are idempotent (the same
+        # parameters, a reset to the same seed, stop), so the request is sent again every
+        # RESEND_S; only the newest request's answer counts (a reset answers with its stamp).
+        deadline = time.monotonic() + self.timeout
+        while True:
+            future = client.call_async(request)
+            left = deadline - time.monotonic()
+            if self.spin_until(future.done, max(min(RESEND_S, left), 0.0)):
+                return future.result()
             client.remove_pending_request(future)
-            raise SimUnavailableError(f'{what} of nav_sim in {self.where} timed out after '
-                                      f'{self.timeout} s')
-        return future.result()
+            if time.monotonic() >= deadline:
+                raise SimUnavailableError(f'{what} of nav_sim in {self.where} timed out after '
+                                          f'{self.timeout} s')
 
     # --- public API -----------------------------------------------------------------------
     def wait_for_sim(self, timeout: float | None = None,

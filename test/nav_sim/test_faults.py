@@ -17,7 +17,7 @@ import pytest
 from rclpy.parameter_client import AsyncParameterClient
 
 from nav_sim.client import SimClient
-from nav_sim.errors import ScenarioError
+from nav_sim.errors import ScenarioError, SimUnavailableError
 from nav_sim.sim_process import SimProcess, executable_command, ros_args
 
 CLOCK_TICK = os.sysconf('SC_CLK_TCK')
@@ -204,3 +204,46 @@ def test_ctrl_c_during_a_take_is_an_interrupt_not_a_runtime_error():
     with pytest.raises(RuntimeError, match='something else'):
         _take(SimpleNamespace(handle=SimpleNamespace(take_message=broken), msg_type=object,
                               raw=False))
+
+
+class LosingClient:
+    """A service client whose first ``lost`` requests are never answered (responses lost)."""
+
+    srv_name = '/x/reset'
+
+    def __init__(self, lost: int) -> None:
+        from rclpy.task import Future
+
+        self.future, self.lost, self.sent, self.removed = Future, lost, [], []
+
+    def wait_for_service(self, timeout_sec: float) -> bool:
+        return True
+
+    def call_async(self, request: object) -> object:
+        future = self.future()
+        self.sent.append(future)
+        if len(self.sent) > self.lost:
+            future.set_result(f'answer {len(self.sent)}')
+        return future
+
+    def remove_pending_request(self, future: object) -> None:
+        self.removed.append(future)
+
+
+def test_a_lost_service_response_is_asked_for_again_until_the_time_out(namespace, monkeypatch):
+    # Fast DDS drops a response sent before the server has matched the client's response
+    # reader; the sim's services are idempotent, so the client sends the request again
+    import nav_sim.client as client_module
+
+    monkeypatch.setattr(client_module, 'RESEND_S', 0.05)
+    with SimClient(namespace, timeout=1.0) as client:
+        monkeypatch.setattr(client, 'sim_present', lambda: True)  # no sim runs in this test
+        two_lost = LosingClient(lost=2)
+        assert client._call(two_lost, object(), 'reset') == 'answer 3'
+        assert two_lost.removed == two_lost.sent[:2]  # a late answer to those is dropped
+        never = LosingClient(lost=10**6)
+        start_time = time.monotonic()
+        with pytest.raises(SimUnavailableError, match=r'reset of nav_sim in .* timed out after 1'):
+            client._call(never, object(), 'reset')
+        assert 1.0 <= time.monotonic() - start_time < 5.0
+        assert len(never.sent) >= 5 and never.removed == never.sent
