@@ -73,17 +73,6 @@ def episode_anatomy(trace: dict[str, Any], frames: np.ndarray) -> EpisodeAnatomy
                       if {a, b} == {LEFT, RIGHT}))
 
 
-def set_anatomy(eval_dir: Path, set_name: str, seeds: Iterable[int] | None = None,
-                ) -> list[EpisodeAnatomy]:
-    """Describe the traced episodes of one evaluated set, by seed ([] without traces).
-
-    ``seeds``: only these (the set's seeds in its results: an earlier evaluation of other
-    seeds leaves its traces in the same folder).  An episode whose trace or frames are missing
-    or unreadable is left out.
-    """
-    return traces_anatomy(layout.read_traces(eval_dir, set_name, seeds))
-
-
 def traces_anatomy(traces: Iterable[tuple[Path, dict[str, Any]]]) -> list[EpisodeAnatomy]:
     """Describe episodes from their ``(path, trace)`` pairs (:func:`nav_gym.run_dir.read_traces`).
 

@@ -65,11 +65,12 @@ def test_a_set_is_read_from_its_traces(tmp_path):
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(trace(seed, outcome, [F, F])))
         np.savez_compressed(layout.frames_path(path), obs=frames_with_goal([True, True, True]))
-    eps = anatomy.set_anatomy(tmp_path, 'dqn_heldout')
+    eps = anatomy.traces_anatomy(layout.read_traces(tmp_path, 'dqn_heldout'))
     assert [(e.seed, e.outcome, e.in_view) for e in eps] == [(201, 'success', 2),
                                                              (202, 'timeout', 2)]
-    assert [e.seed for e in anatomy.set_anatomy(tmp_path, 'dqn_heldout', [202, 203])] == [202]
-    assert anatomy.set_anatomy(tmp_path, 'dqn_train') == []
+    assert [e.seed for e in anatomy.traces_anatomy(
+        layout.read_traces(tmp_path, 'dqn_heldout', [202, 203]))] == [202]
+    assert anatomy.traces_anatomy(layout.read_traces(tmp_path, 'dqn_train')) == []
 
 
 def test_frames_that_do_not_match_the_decisions_are_refused():
