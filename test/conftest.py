@@ -1,7 +1,12 @@
-"""Test-wide ROS isolation: a private DDS domain per test run, traffic kept on this machine."""
+"""Test-wide ROS isolation (a private DDS domain per test run, traffic kept on this machine).
+
+Also the fixtures every test folder shares.  Plain helpers (``wait_until``, ``free_port``,
+``interrupt``) are in ``helpers.py``: a conftest cannot be imported by name.
+"""
 
 from __future__ import annotations
 
+import itertools
 import os
 import sys
 
@@ -12,6 +17,17 @@ os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 os.environ.setdefault('MUJOCO_GL', 'egl')
+
+_names = itertools.count()
+
+
+@pytest.fixture
+def namespace() -> str:
+    """Return a ROS namespace no other test, in this run or a concurrent one, uses.
+
+    The process id keeps concurrent runs apart; the counter keeps this run's tests apart.
+    """
+    return f'/t{os.getpid()}_{next(_names)}'
 
 
 @pytest.fixture(scope='session')

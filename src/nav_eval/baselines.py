@@ -1,12 +1,10 @@
-"""Scripted baselines on both scenario banks: how hard each bank is without any learning.
+"""Run the scripted baselines on both scenario banks and write them as JSON.
 
     python -m nav_eval.baselines [--config FILE] [--sim-params '{...}'] [--train-seeds 101-200]
                                  [--heldout-seeds 201-300] [--out baselines.json]
 
-The uniform-random policy and the image-only servo (``nav_eval.policies``) run on the training
-and the held-out seeds through the same environment a run trains on (its sim settings, action
-speeds and episode limit).  The result has the shape of an evaluation's ``results.json`` (one
-entry per set with its summary and episodes), so the sweep's statistics read both alike.
+The uniform-random policy and the image-only servo, through the environment of a training
+config (:mod:`nav_eval.evaluation.baselines`); a sweep runs this for each configuration.
 """
 
 from __future__ import annotations
@@ -15,58 +13,12 @@ import argparse
 import json
 import time
 from pathlib import Path
-from typing import Any
 
-from nav_eval import metrics
-from nav_eval.errors import EvaluationError
-from nav_eval.evaluate import env_for_run, parse_seeds, run_episode
-from nav_eval.policies import Policy, RandomPolicy, ServoPolicy
+from nav_eval.evaluation.baselines import BASELINE_POLICIES, run_baselines
+from nav_eval.seeds import HELDOUT_BANK, TRAIN_BANK, parse_seeds, seed_text
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.timing import quiet_learner_threads
-from nav_gym.train_config import TrainConfig, build
-from nav_sim.config import SimConfig
-
-BASELINE_POLICIES = ('random', 'servo')
-SPLITS = ('train', 'heldout')
-
-
-def make_policy(name: str, config: TrainConfig) -> Policy:
-    """Make the baseline policy ``name`` for the actions and camera of ``config``."""
-    if name == 'random':
-        return RandomPolicy()
-    if name == 'servo':
-        sim = SimConfig.from_params(config.sim_params)
-        return ServoPolicy.for_actions(config.turn_rate, sim.ctrl_dt, sim.camera_hfov_deg)
-    raise EvaluationError(f'unknown baseline policy {name!r}; known: {BASELINE_POLICIES}')
-
-
-def run_baselines(config: TrainConfig, train_seeds: tuple[int, ...],
-                  heldout_seeds: tuple[int, ...],
-                  policies: tuple[str, ...] = BASELINE_POLICIES,
-                  progress: bool = False) -> dict[str, Any]:
-    """Run every baseline policy on both banks; returns ``{'config': ..., 'sets': [...]}``."""
-    seeds = {'train': train_seeds, 'heldout': heldout_seeds}
-    env = env_for_run(config, record=False)
-    sets = []
-    try:
-        for name in policies:
-            policy = make_policy(name, config)
-            for split in SPLITS:
-                results = [run_episode(env, policy, seed, split)[0] for seed in seeds[split]]
-                summary = metrics.summarize(results)
-                if progress:
-                    print(f'  {name:<6} {split:<7} {len(results)} episodes: success '
-                          f'{summary.success_rate:.0%}, collisions {summary.collision_rate:.0%}',
-                          flush=True)
-                sets.append({'name': f'{name}_{split}', 'policy': name, 'split': split,
-                             'seeds': list(seeds[split]), 'summary': summary.to_dict(),
-                             'episodes': [r.to_dict() for r in results]})
-    finally:
-        env.close()
-    return {'config': {'sim_params': config.sim_params, 'forward_speed': config.forward_speed,
-                       'turn_rate': config.turn_rate, 'turn_speed': config.turn_speed,
-                       'max_episode_steps': config.max_episode_steps},
-            'sets': sets}
+from nav_gym.train_config import build
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -74,8 +26,8 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--config', help='training config YAML (default: the defaults)')
     parser.add_argument('--sim-params', help="sim settings as JSON/YAML, e.g. '{\"x\": 1}'")
-    parser.add_argument('--train-seeds', default='101-200')
-    parser.add_argument('--heldout-seeds', default='201-300')
+    parser.add_argument('--train-seeds', default=seed_text(TRAIN_BANK))
+    parser.add_argument('--heldout-seeds', default=seed_text(HELDOUT_BANK))
     parser.add_argument('--policies', default=','.join(BASELINE_POLICIES))
     parser.add_argument('--out', type=Path, default=Path('baselines.json'))
     args = parser.parse_args(strip_ros_args(argv))

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from nav_gym.errors import NavGymError
+from nav_sim.errors import VisnavError
 
 
-class NavEvalError(NavGymError):
-    """Base class of every nav_eval error (a NavGymError, so the commands print it cleanly)."""
+class NavEvalError(VisnavError):
+    """Base class of every nav_eval error."""
 
 
 class EvaluationError(NavEvalError, RuntimeError):
@@ -19,3 +19,15 @@ class DiagnosisError(NavEvalError, RuntimeError):
 
 class RecordingError(NavEvalError, RuntimeError):
     """A bag cannot be written (target exists, writer failure) or the recording failed."""
+
+
+class ReportError(NavEvalError, RuntimeError):
+    """The report cannot be written (e.g. the directory is not a run directory)."""
+
+
+class SweepError(NavEvalError, ValueError):
+    """A sweep's settings or directory are not usable (the message says what to change)."""
+
+
+class TrialFailedError(NavEvalError, RuntimeError):
+    """A stage of a sweep trial exited with an error; the message ends with its log's tail."""

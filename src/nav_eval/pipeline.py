@@ -16,17 +16,21 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-from nav_eval import diagnose, evaluate, report
 from nav_eval.errors import DiagnosisError
+from nav_eval.evaluation.runner import evaluate, results_markdown
+from nav_eval.evaluation.sets import DEFAULT_SETS, plan_sets
+from nav_eval.reporting.diagnosis_report import diagnose_run
+from nav_eval.reporting.run_report import write_report
+from nav_eval.seeds import WORKSHOP_HELDOUT, WORKSHOP_TRAIN
 from nav_gym import train_config
-from nav_gym.checkpoints import checkpoints
 from nav_gym.checks import run_checklist
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.config import EnvConfig
 from nav_gym.env import NavigationEnv
 from nav_gym.live_hooks import add_live_argument
+from nav_gym.run_dir import CONFIG, FINAL_MODEL, VALIDATION, checkpoints
 from nav_gym.timing import quiet_learner_threads
-from nav_gym.train import new_run_dir, train
+from nav_gym.train import config_and_run_dir, train, write_text
 from nav_gym.train_config import TrainConfig
 from nav_gym.validate import format_checklist
 
@@ -56,7 +60,7 @@ def validate_run(config: TrainConfig, run_dir: Path) -> bool:
     finally:
         env.close()
     print(format_checklist(checks), flush=True)
-    (run_dir / 'validation.json').write_text(json.dumps([asdict(c) for c in checks], indent=1))
+    (run_dir / VALIDATION).write_text(json.dumps([asdict(c) for c in checks], indent=1))
     return all(c.passed for c in checks)
 
 
@@ -65,13 +69,13 @@ def run_pipeline(config: TrainConfig, run_dir: Path, resume: bool,
     """Run the five stages (skipping finished ones); ``live_port`` serves the live view."""
     start = time.perf_counter()
     stage(1)
-    if resume and (run_dir / 'validation.json').is_file():
+    if resume and (run_dir / VALIDATION).is_file():
         print('already validated (validation.json)')
     elif not validate_run(config, run_dir):
         print('validation failed: fix the environment before training (see above)')
         return 1
     stage(2)
-    if (run_dir / 'final_model.zip').is_file():
+    if (run_dir / FINAL_MODEL).is_file():
         print('already trained (final_model.zip)')
     else:
         summary = train(config, run_dir, resume=resume and bool(checkpoints(run_dir)),
@@ -81,18 +85,16 @@ def run_pipeline(config: TrainConfig, run_dir: Path, resume: bool,
         if summary['interrupted']:
             return 130
     stage(3)
-    sets = evaluate.plan_sets(run_dir, list(evaluate.DEFAULT_SETS), evaluate.TRAIN_SEEDS,
-                              evaluate.HELDOUT_SEEDS)
-    results = evaluate.evaluate(run_dir, sets, live_port=live_port)
-    print(evaluate.results_markdown(results['sets']))
+    sets = plan_sets(run_dir, list(DEFAULT_SETS), WORKSHOP_TRAIN, WORKSHOP_HELDOUT)
+    results = evaluate(run_dir, sets, live_port=live_port)
+    print(results_markdown(results['sets']))
     stage(4)
     try:
-        diagnose.run(run_dir)
+        diagnose_run(run_dir)
     except DiagnosisError as exc:
         print(f'no diagnosis: {exc}')
     stage(5)
-    path = report.write_report(run_dir, experiments if experiments and experiments.is_file()
-                               else None)
+    path = write_report(run_dir, experiments if experiments and experiments.is_file() else None)
     print(f'report: {path} (and {path.with_suffix(".html")})')
     print(f'pipeline finished in {time.perf_counter() - start:.0f} s; run directory {run_dir}')
     return 0
@@ -113,15 +115,10 @@ def main(argv: list[str] | None = None) -> None:
     quiet_learner_threads()
 
     def body() -> int:
-        if args.resume:
-            run_dir = Path(args.resume)
-            base = train_config.load_yaml(run_dir / 'config.yaml') \
-                if (run_dir / 'config.yaml').is_file() else {}
-            config = train_config.build(args.config, overrides, base)
-        else:
-            config = train_config.build(args.config, overrides).with_full_sim_params()
-            run_dir = new_run_dir(config)
-            (run_dir / 'config.yaml').write_text(config.to_yaml())
+        config, run_dir = config_and_run_dir(args.config, overrides, args.resume)
+        config = config.with_full_sim_params()
+        if not args.resume:  # written now: an interrupted validation resumes too
+            write_text(run_dir / CONFIG, config.to_yaml())
         print(f'run directory: {run_dir}', flush=True)
         return run_pipeline(config, run_dir, bool(args.resume), args.experiments,
                             live_port=args.live)

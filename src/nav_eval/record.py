@@ -1,7 +1,8 @@
 """``ros2 run nav_eval record OUTPUT_DIR``: record a running nav_sim graph into an MCAP bag.
 
-Records the nav_sim topics of one namespace (see :mod:`nav_eval.bag_recorder`) until Ctrl-C,
-SIGTERM or ``--duration`` seconds, then finishes the bag and prints the messages per topic.
+Records the nav_sim topics of one namespace (see :mod:`nav_eval.recording.recorder`) until
+Ctrl-C, SIGTERM or ``--duration`` seconds (:mod:`nav_eval.recording.session`), then finishes
+the bag and prints the messages per topic.
 Works with any driver, e.g. a realtime-mode sim teleoperated with ``ros2 topic pub cmd_vel``.
 A ``--ros-args ...`` block (``ros2 run`` may pass one) is accepted and ignored: use
 ``--namespace``.
@@ -12,18 +13,14 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
-import time
 from collections.abc import Sequence
-from types import FrameType
 
-from nav_eval.bag_recorder import BagRecorder
-from nav_eval.bags import PERIOD_TOPICS
 from nav_eval.errors import RecordingError
+from nav_eval.recording.recorder import BagRecorder
+from nav_eval.recording.session import StopRequest, format_counts, wait_until_stopped
 from nav_gym.cli import strip_ros_args
 
 PROG = 'nav-eval-record'
-TICK_S = 0.1
-NOTICE_S = 5.0
 
 
 def positive_seconds(text: str) -> float:
@@ -51,54 +48,6 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     return parser.parse_args(strip_ros_args(argv))
 
 
-class StopRequest:
-    """Set by SIGINT/SIGTERM; a flag, so the handler can interrupt nothing mid-way."""
-
-    def __init__(self) -> None:
-        """Start with no signal received."""
-        self.signal_name: str | None = None
-
-    def __call__(self, signum: int, frame: FrameType | None) -> None:
-        """Note the signal's name (the signal handler)."""
-        self.signal_name = signal.Signals(signum).name
-
-
-def wait_until_stopped(recorder: BagRecorder, stop: StopRequest,
-                       duration: float | None) -> None:
-    """Sleep in short ticks until a stop signal arrives or ``duration`` seconds pass.
-
-    Says once when the sim's publishers are matched, or after ``NOTICE_S`` that none are, and
-    once when a message of every per-period topic has arrived (the sim delivers to the bag).
-    """
-    where = recorder.namespace or '/'
-    start = time.monotonic()
-    deadline = None if duration is None else start + duration
-    found = hinted = receiving = False
-    while stop.signal_name is None:
-        if found and not receiving and recorder.wait_for(0, 0.0, PERIOD_TOPICS):
-            receiving = True
-            print(f'{PROG}: receiving every nav_sim topic of {where}', flush=True)
-        if not found and recorder.wait_for_publishers(0.0):
-            found = True
-            print(f'{PROG}: nav_sim publishers matched in {where}', flush=True)
-        elif not (found or hinted) and time.monotonic() - start > NOTICE_S:
-            hinted = True
-            print(f'{PROG}: no nav_sim publishers in {where} yet (recording anyway); is the '
-                  'sim running in that namespace (--namespace)?', flush=True)
-        left = TICK_S if deadline is None else deadline - time.monotonic()
-        if left <= 0.0:
-            return
-        time.sleep(min(TICK_S, left))
-
-
-def format_counts(counts: dict[str, int]) -> str:
-    """One ``count  topic`` line per topic, then the total."""
-    width = max([len(str(n)) for n in counts.values()] + [5])
-    lines = [f'{n:>{width}}  {topic}' for topic, n in sorted(counts.items())]
-    lines.append(f'{sum(counts.values()):>{width}}  total')
-    return '\n'.join(lines)
-
-
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run nav_eval record`` and the ``nav-eval-record`` script."""
     options = parse_args(sys.argv[1:] if args is None else args)
@@ -113,7 +62,7 @@ def main(args: list[str] | None = None) -> None:
               '(Ctrl-C to stop)', flush=True)
         failure = None
         try:
-            wait_until_stopped(recorder, stop, options.duration)
+            wait_until_stopped(recorder, stop, options.duration, PROG)
         finally:
             try:
                 recorder.close()

@@ -1,4 +1,8 @@
-"""Command-line helpers shared by the nav_gym commands: env options and readable errors."""
+"""Command-line helpers of every visnav command (nav_gym's and nav_eval's): options, errors.
+
+Each command strips the ``--ros-args`` blocks ``ros2 run`` passes, and runs its body through
+:func:`run_command`, which prints any :class:`nav_sim.errors.VisnavError` as one line.
+"""
 
 from __future__ import annotations
 
@@ -8,8 +12,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from nav_gym.config import SIM_MODES, EnvConfig
-from nav_gym.errors import NavGymError
-from nav_sim.errors import NavSimError
+from nav_sim.errors import VisnavError
 
 
 def add_env_arguments(parser: argparse.ArgumentParser) -> None:
@@ -49,7 +52,7 @@ def run_command(name: str, body: Callable[[], int]) -> None:
     """Run a command body: readable one-line errors, exit 130 on Ctrl-C, never a traceback."""
     try:
         code = body()
-    except (NavGymError, NavSimError) as exc:
+    except VisnavError as exc:
         print(f'{name}: error: {exc}', file=sys.stderr)
         code = 1
     except KeyboardInterrupt:

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from nav_sim.errors import VisnavError
 
-class NavGymError(Exception):
+
+class NavGymError(VisnavError):
     """Base class of every nav_gym error."""
 
 

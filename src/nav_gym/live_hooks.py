@@ -1,8 +1,8 @@
-"""Hooks of the live view and the step time budget for the commands (light imports only).
+"""Hooks of the live view for the commands (light imports only).
 
-``--live [PORT]`` for nav-gym-train, nav-eval-evaluate, visnav-pipeline and the demo; the
-learner's share of the step budget; the training statistics callback.  The live view itself
-(:mod:`nav_gym.live_view`, Foxglove) is imported only when it is switched on.
+``--live [PORT]`` for nav-gym-train, nav-eval-evaluate, visnav-pipeline and the demo, and the
+training statistics callback.  The live view itself (:mod:`nav_gym.live_view`, Foxglove) is
+imported only when it is switched on.
 """
 
 from __future__ import annotations
@@ -19,47 +19,6 @@ def add_live_argument(parser: argparse.ArgumentParser) -> None:
                         metavar='PORT', help='serve a Foxglove live view on ws://localhost:PORT '
                         f'(default port {DEFAULT_LIVE_PORT}; layout: '
                         'config/foxglove/visnav.json)')
-
-
-def timed_dqn(timing: Any | None, double_q: bool = False) -> type:
-    """Return a DQN class that counts its gradient steps and predictions into ``timing``.
-
-    ``timing`` is the env's step budget (``env.timing``): SB3's ``train`` (gradient steps) and
-    ``predict`` calls become the learner's share of every env step.  A subclass, not wrappers
-    set on the model, so the timing never becomes model state that saving would pickle; a
-    checkpoint of it loads with ``DQN.load`` as any other.  The learner is SB3's DQN, or with
-    ``double_q`` :class:`nav_gym.double_dqn.DoubleDQN` (a diagnosis, not the workshop's
-    learner); without ``timing`` that class itself is returned, untimed.
-    """
-    import time
-
-    if double_q:
-        from nav_gym.double_dqn import DoubleDQN as DQN
-    else:
-        from stable_baselines3 import DQN
-    if timing is None:
-        return DQN
-
-    class TimedDQN(DQN):
-        """The learner (SB3's DQN or Double DQN) with its ``train`` and ``predict`` timed."""
-
-        def train(self, *args: Any, **kwargs: Any) -> Any:
-            """Run SB3's gradient steps, timed as ``gradient_step``."""
-            start = time.perf_counter()
-            try:
-                return super().train(*args, **kwargs)
-            finally:
-                timing.add('gradient_step', time.perf_counter() - start)
-
-        def predict(self, *args: Any, **kwargs: Any) -> Any:
-            """Run SB3's ``predict``, timed as ``predict``."""
-            start = time.perf_counter()
-            try:
-                return super().predict(*args, **kwargs)
-            finally:
-                timing.add('predict', time.perf_counter() - start)
-
-    return TimedDQN
 
 
 def training_callback(env: Any) -> Any:

@@ -15,22 +15,20 @@ from typing import Any
 
 import numpy as np
 
+from nav_gym.observers import EpisodeObserver
 from nav_sim import live_topics
-from nav_sim.live import EpisodeScene, LiveView
+from nav_sim.live import LiveView
 
 ROLLING_EPISODES = 100   # SB3's ep_info_buffer length: the same rolling window as its logger
 
 
-class EnvLive:
+class EnvLive(EpisodeObserver):
     """Log one env's resets and steps to a live view."""
 
     def __init__(self, port: int, sim_params: dict[str, Any] | None = None) -> None:
         """Start the server on ``port`` and read the arena of the env's sim settings."""
         self.view = LiveView(port, live_topics.ENV_TOPICS, name='visnav env')
-        self.scene = EpisodeScene(live_topics.arena_for(sim_params))
-        self.episode = 0
-        self.episode_return = 0.0
-        self.q_values: Any = None
+        super().__init__(sim_params)
         self.stamp_ns = 0
         self._returns: deque[float] = deque(maxlen=ROLLING_EPISODES)
         self._successes: deque[float] = deque(maxlen=ROLLING_EPISODES)
@@ -41,17 +39,11 @@ class EnvLive:
         """The ``ws://`` address viewers open."""
         return self.view.url
 
-    def note_q_values(self, q_values: Any) -> None:
-        """Attach the policy's Q-values to the next step's ``/visnav/step`` (evaluation)."""
-        self.q_values = q_values
-
     def on_reset(self, stamp_ns: int, rgb: np.ndarray, obs: np.ndarray,
                  info: dict[str, Any]) -> None:
         """Log the first frame of an episode and its scene."""
-        self.episode += 1
-        self.episode_return = 0.0
+        self.begin_episode(info)
         self.stamp_ns = stamp_ns
-        self.scene.reset(info['scenario'], info['pose'])
         self._images(stamp_ns, rgb, obs)
         self.scene.log(self.view, stamp_ns, new_episode=True)
 
@@ -60,20 +52,16 @@ class EnvLive:
         """Log one step: images, robot and path, and the step's action, rewards and event."""
         view = self.view
         self.stamp_ns = stamp_ns
-        self.episode_return += reward
-        self.scene.step(info['pose'])
+        q_values = self.follow_step(reward, info)
         self._images(stamp_ns, rgb, obs)
         self.scene.log(view, stamp_ns, new_episode=False)
-        q_values, self.q_values = self.q_values, None
-        view.log(live_topics.STEP_TOPIC, lambda: live_topics.env_step(
-            stamp_ns, self.episode, info['step'], action, info['action_name'], reward,
-            info['reward_terms'], self.episode_return, info['distance'], info['event'],
-            q_values), stamp_ns, force=done)
+        view.log(live_topics.STEP_TOPIC,
+                 lambda: self.step_message(stamp_ns, action, reward, info, q_values), stamp_ns,
+                 force=done)
         if done:
             self._returns.append(self.episode_return)
             self._successes.append(1.0 if info['event'] == 'goal' else 0.0)
             self._lengths.append(int(info['step']))
-
     def _images(self, stamp_ns: int, rgb: np.ndarray, obs: np.ndarray) -> None:
         view = self.view
         view.log(live_topics.CAMERA_TOPIC,

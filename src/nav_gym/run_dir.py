@@ -1,21 +1,27 @@
-"""The layout of a run directory (no ROS, no torch), in one place.
+"""The layout of a run directory (no ROS, no torch): the one place that spells a run's paths.
 
-Training, evaluation, diagnosis and the report share it, as they share :mod:`nav_gym.checkpoints`
-for checkpoint names.
+Training, evaluation, diagnosis, the report and the sweep all name a run's files through it.
 
-    RUN/config.yaml            the effective TrainConfig (load_config)
-    RUN/monitor.csv            SB3 Monitor episodes (read_monitor)
-    RUN/summary.json           timing of the training sessions
-    RUN/final_model.zip        the model at the end of training
-    RUN/checkpoints/           dqn_<steps>_steps.zip + the latest replay buffer (resume only)
-    RUN/eval/results.json      evaluation results; eval/traces/<set>/seed_<n>.json + _frames.npz
+    RUN/config.yaml              the effective TrainConfig (load_config)
+    RUN/monitor.csv              SB3 Monitor episodes (read_monitor)
+    RUN/summary.json             timing of the training sessions
+    RUN/validation.json          the environment checklist (the main job's first stage)
+    RUN/tb/                      TensorBoard logs
+    RUN/final_model.zip          the model at the end of training
+    RUN/checkpoints/             dqn_<steps>_steps.zip (checkpoints) + the latest replay buffer
+    RUN/eval/results.json        evaluation results, with results.md and episodes.csv beside it;
+                                 traces/<set>/seed_<n>.json + _frames.npz; bags/<set>/ (MCAP);
+                                 diagnosis.json, diagnosis.md and figures/; videos/;
+                                 curve/<steps>/ (a sweep's evaluation of each checkpoint)
+    RUN/report/Result.md         the report, with Result.html, figures/ and videos/
 """
 
 from __future__ import annotations
 
 import csv
 import json
-from collections.abc import Iterable, Iterator
+import re
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -25,13 +31,30 @@ from nav_gym.train_config import TrainConfig, load_yaml
 CONFIG = 'config.yaml'
 MONITOR = 'monitor.csv'
 SUMMARY = 'summary.json'
+VALIDATION = 'validation.json'
+TENSORBOARD = 'tb'
 FINAL_MODEL = 'final_model.zip'
 CHECKPOINTS = 'checkpoints'
 REPLAY_BUFFER = 'replay_buffer.pkl'
 REPLAY_BUFFER_STEP = 'replay_buffer.step'
+#: what only a run directory holds (one of them is enough to call a folder a run)
+RUN_MARKERS = (SUMMARY, CONFIG, MONITOR)
+CHECKPOINT_RE = re.compile(r'dqn_(\d+)_steps\.zip$')
+# RUN/eval/
 EVAL = 'eval'
 RESULTS = 'results.json'
+RESULTS_TABLE = 'results.md'
+EPISODES_CSV = 'episodes.csv'
 TRACES = 'traces'
+BAGS = 'bags'
+DIAGNOSIS = 'diagnosis.json'
+DIAGNOSIS_TEXT = 'diagnosis.md'
+FIGURES = 'figures'
+VIDEOS = 'videos'
+CURVE = 'curve'
+# RUN/report/
+REPORT = 'report'
+REPORT_TEXT = 'Result.md'
 #: the run settings evaluation must share with training (compared by the diagnosis)
 EVAL_SETTINGS = ('sim_params', 'forward_speed', 'turn_rate', 'turn_speed', 'max_episode_steps',
                  'progress_weight', 'step_penalty', 'goal_reward', 'collision_penalty')
@@ -54,9 +77,42 @@ def load_config(run_dir: str | Path) -> TrainConfig:
     return TrainConfig(**load_yaml(path))
 
 
+def is_run_dir(path: Path) -> bool:
+    """Tell whether ``path`` is a directory holding one of a run's own files."""
+    return Path(path).is_dir() and any((Path(path) / m).is_file() for m in RUN_MARKERS)
+
+
 def eval_settings(config: TrainConfig) -> dict[str, Any]:
     """Return the settings of ``config`` that evaluation must share with training."""
     return {key: getattr(config, key) for key in EVAL_SETTINGS}
+
+
+# --- checkpoints -------------------------------------------------------------------------------
+def checkpoint_path(run_dir: Path, steps: int) -> Path:
+    """Return the path of the checkpoint saved at ``steps`` environment steps."""
+    return Path(run_dir) / CHECKPOINTS / f'dqn_{steps}_steps.zip'
+
+
+def checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
+    """Return (steps, path) of the run's ``checkpoints/dqn_<steps>_steps.zip``, oldest first."""
+    found = []
+    for path in (Path(run_dir) / CHECKPOINTS).glob('dqn_*_steps.zip'):
+        match = CHECKPOINT_RE.search(path.name)
+        if match:
+            found.append((int(match.group(1)), path))
+    return sorted(found)
+
+
+def parse_checkpoint_name(name: str) -> int | None:
+    """Return the steps a checkpoint file name carries (None for another name)."""
+    match = CHECKPOINT_RE.search(name)
+    return int(match.group(1)) if match else None
+
+
+# --- evaluation --------------------------------------------------------------------------------
+def curve_dir(run_dir: Path, steps: int) -> Path:
+    """Return where a sweep evaluates the checkpoint of ``steps`` (``eval/curve/<steps>``)."""
+    return Path(run_dir) / EVAL / CURVE / str(steps)
 
 
 def trace_path(eval_dir: Path, set_name: str, seed: int) -> Path:
@@ -75,11 +131,13 @@ def trace_files(eval_dir: Path, set_name: str) -> list[Path]:
 
 
 def read_traces(eval_dir: Path, set_name: str, seeds: Iterable[int] | None = None,
+                on_error: Callable[[Path, Exception], None] | None = None,
                 ) -> Iterator[tuple[Path, dict[str, Any]]]:
     """Yield ``(path, trace)`` for the traced episodes of one evaluated set (any order).
 
     ``seeds``: only these (an earlier evaluation of other seeds leaves its traces in the same
-    folder).  A trace that cannot be read or parsed, or names no seed, is skipped.
+    folder).  A trace that cannot be read or parsed, or names no seed, is skipped, and passed to
+    ``on_error`` with the exception when one is given.
     """
     wanted = None if seeds is None else set(seeds)
     for path in trace_files(eval_dir, set_name):
@@ -87,7 +145,9 @@ def read_traces(eval_dir: Path, set_name: str, seeds: Iterable[int] | None = Non
             trace = json.loads(path.read_text())
             if wanted is not None and trace['seed'] not in wanted:
                 continue
-        except (OSError, ValueError, KeyError, TypeError):
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            if on_error is not None:
+                on_error(path, exc)
             continue
         yield path, trace
 

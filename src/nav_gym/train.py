@@ -32,19 +32,28 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from nav_gym import run_dir as layout
 from nav_gym import train_config
-from nav_gym.checkpoints import checkpoints
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.env import NavigationEnv
 from nav_gym.errors import CheckpointError, DiskFullError, TrainConfigError, TrainingError
-from nav_gym.live_hooks import add_live_argument, timed_dqn, training_callback
+from nav_gym.live_hooks import add_live_argument, training_callback
+from nav_gym.run_dir import (
+    CHECKPOINTS,
+    CONFIG,
+    FINAL_MODEL,
+    MONITOR,
+    REPLAY_BUFFER,
+    REPLAY_BUFFER_STEP,
+    SUMMARY,
+    TENSORBOARD,
+    checkpoint_path,
+    checkpoints,
+    load_config,
+)
 from nav_gym.timing import EnvTimer, quiet_learner_threads
 from nav_gym.train_config import TrainConfig
 from nav_sim.errors import NavSimError
 
-REPLAY_BUFFER = layout.REPLAY_BUFFER
-REPLAY_BUFFER_STEP = layout.REPLAY_BUFFER_STEP
 RESUME_COMMAND = 'nav-gym-train --resume'
 #: fault injection for the test suite: the name of a file whose save pauses (before the
 #: rename) until a signal arrives, once per process
@@ -105,9 +114,9 @@ def buffer_nbytes(buffer: Any) -> int:
 
 def save_checkpoint(model: Any, run_dir: Path, with_buffer: bool) -> Path:
     """Save ``checkpoints/dqn_<steps>_steps.zip`` (and the replay buffer that belongs to it)."""
-    folder = run_dir / layout.CHECKPOINTS
+    folder = run_dir / CHECKPOINTS
     folder.mkdir(parents=True, exist_ok=True)
-    path = folder / f'dqn_{model.num_timesteps}_steps.zip'
+    path = checkpoint_path(run_dir, model.num_timesteps)
     found = checkpoints(run_dir)
     atomic_write(path, model.save, found[-1][1].stat().st_size if found else None)
     if with_buffer:
@@ -126,15 +135,16 @@ def save_replay_buffer(model: Any, folder: Path) -> None:
 
 def delete_replay_buffer(run_dir: Path) -> None:
     """Delete the replay buffer and its step marker (marker first)."""
-    folder = run_dir / layout.CHECKPOINTS
+    folder = run_dir / CHECKPOINTS
     (folder / REPLAY_BUFFER_STEP).unlink(missing_ok=True)
     (folder / REPLAY_BUFFER).unlink(missing_ok=True)
 
 
 def load_model(path: Path, env: Any, device: str, double_q: bool = False) -> Any:
     """Load a DQN checkpoint (timed as :func:`build_model`'s) or raise CheckpointError."""
+    from nav_gym.learner import learner_class  # torch: after quiet_learner_threads()
     try:
-        return timed_dqn(env.unwrapped.timing if env is not None else None, double_q).load(
+        return learner_class(env.unwrapped.timing if env is not None else None, double_q).load(
             path, env=env, device=device)
     except (zipfile.BadZipFile, EOFError, KeyError, ValueError, RuntimeError, OSError,
             AssertionError) as exc:
@@ -163,7 +173,7 @@ def new_run_dir(config: TrainConfig) -> Path:
     """Create the directory of a new run, or raise a one-line error."""
     name = config.run_name or datetime.now().strftime('dqn_%Y%m%d_%H%M%S')
     run_dir = Path(config.runs_dir) / name
-    if (run_dir / layout.CONFIG).exists():
+    if (run_dir / CONFIG).exists():
         raise CheckpointError(f'{run_dir} already holds a run: resume it with --resume '
                               f'{run_dir}, or choose another --run-name')
     try:
@@ -177,7 +187,7 @@ def new_run_dir(config: TrainConfig) -> Path:
 def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> tuple[Any, EnvTimer]:
     """Return ``Monitor(EnvTimer(NavigationEnv))`` writing the run's monitor.csv."""
     from stable_baselines3.common.monitor import Monitor
-    monitor_file = run_dir / layout.MONITOR
+    monitor_file = run_dir / MONITOR
     timer = EnvTimer(NavigationEnv(config.env_config()))
     # a resumed run appends to its Monitor CSV (SB3 writes the header only for a new file)
     env = Monitor(timer, str(monitor_file), info_keywords=('is_success', 'event'),
@@ -188,18 +198,19 @@ def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> tuple[Any, En
 def build_model(config: TrainConfig, run_dir: Path, env: Any, resume: bool) -> Any:
     """Return a new DQN, or the newest checkpoint's with its replay buffer when it has one."""
     if not resume:
+        from nav_gym.learner import learner_class  # torch: after quiet_learner_threads()
         # the learner's share of every env step is counted into the env's step budget
-        return timed_dqn(env.unwrapped.timing, config.double_q)('CnnPolicy', env,
-                                               tensorboard_log=str(run_dir / 'tb'), verbose=0,
-                                               **config.dqn_kwargs())
+        return learner_class(env.unwrapped.timing, config.double_q)(
+            'CnnPolicy', env, tensorboard_log=str(run_dir / TENSORBOARD), verbose=0,
+            **config.dqn_kwargs())
     found = checkpoints(run_dir)
     if not found:
-        raise CheckpointError(f'no checkpoint in {run_dir / layout.CHECKPOINTS} to resume from')
+        raise CheckpointError(f'no checkpoint in {run_dir / CHECKPOINTS} to resume from')
     steps, path = found[-1]
     model = load_model(path, env, config.device, config.double_q)
-    model.tensorboard_log = str(run_dir / 'tb')
-    buffer = run_dir / layout.CHECKPOINTS / REPLAY_BUFFER
-    buffer_step = _buffer_step(run_dir / layout.CHECKPOINTS / REPLAY_BUFFER_STEP)
+    model.tensorboard_log = str(run_dir / TENSORBOARD)
+    buffer = run_dir / CHECKPOINTS / REPLAY_BUFFER
+    buffer_step = _buffer_step(run_dir / CHECKPOINTS / REPLAY_BUFFER_STEP)
     if config.save_replay_buffer and buffer.exists() and buffer_step != steps:
         note = ('without a replay buffer (the saved one does not belong to this checkpoint)')
     elif config.save_replay_buffer and buffer.exists():
@@ -247,7 +258,7 @@ def train(config: TrainConfig, run_dir: Path, resume: bool = False, *,
 
 def _train(config: TrainConfig, run_dir: Path, resume: bool, hint: str,
            live_port: int = 0) -> dict[str, Any]:
-    write_text(run_dir / layout.CONFIG, config.to_yaml())
+    write_text(run_dir / CONFIG, config.to_yaml())
     env = None
     start = time.perf_counter()
     try:
@@ -295,6 +306,22 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, hint: str,
     return summary
 
 
+def config_and_run_dir(config_file: str | None, overrides: dict[str, Any],
+                       resume: str | None) -> tuple[TrainConfig, Path]:
+    """Return the config and the directory of a new run, or of the run ``resume`` names.
+
+    A resumed run's config.yaml is the base (a directory without one is refused with
+    RunDirError); the config file and the command line still override it.  A new run's
+    directory is created (:func:`new_run_dir`).
+    """
+    if resume:
+        run_dir = Path(resume)
+        base = dataclasses.asdict(load_config(run_dir))
+        return train_config.build(config_file, overrides, base), run_dir
+    config = train_config.build(config_file, overrides)
+    return config, new_run_dir(config)
+
+
 def _sim_failure(timer: EnvTimer, exc: NavSimError) -> str:
     """Say what happened to the sim: the embedded one's exit code and log tail, if it died."""
     died = timer.unwrapped.sim_failure()
@@ -315,14 +342,14 @@ def _save(model: Any, config: TrainConfig, run_dir: Path, summary: dict[str, Any
         path = save_checkpoint(model, run_dir, config.save_replay_buffer)
         _write_summary(run_dir, summary)
         return path
-    final = run_dir / layout.FINAL_MODEL
+    final = run_dir / FINAL_MODEL
     atomic_write(final, model.save)
     _write_summary(run_dir, summary)
     saved.append('final')
     keep = config.save_replay_buffer and config.keep_replay_buffer
     if not keep:
         delete_replay_buffer(run_dir)  # a finished run does not need it (see README)
-    path = run_dir / layout.CHECKPOINTS / f'dqn_{model.num_timesteps}_steps.zip'
+    path = checkpoint_path(run_dir, model.num_timesteps)
     if not _link(final, path):
         save_checkpoint(model, run_dir, with_buffer=False)
     if keep:
@@ -366,7 +393,7 @@ def _summary(config: TrainConfig, run_dir: Path, resume: bool, outcome: str, mod
 
 
 def _write_summary(run_dir: Path, summary: dict[str, Any]) -> None:
-    path = run_dir / layout.SUMMARY
+    path = run_dir / SUMMARY
     sessions = []
     if path.exists():
         try:
@@ -393,13 +420,7 @@ def main(argv: list[str] | None = None) -> None:
     quiet_learner_threads()
 
     def body() -> int:
-        if args.resume:
-            run_dir = Path(args.resume)
-            base = dataclasses.asdict(layout.load_config(run_dir))
-            config = train_config.build(args.config, overrides, base)
-        else:
-            config = train_config.build(args.config, overrides)
-            run_dir = new_run_dir(config)
+        config, run_dir = config_and_run_dir(args.config, overrides, args.resume)
         print(f'run directory: {run_dir}', flush=True)
         summary = train(config, run_dir, resume=bool(args.resume), live_port=args.live)
         print(f"trained {summary['steps_this_session']} steps in {summary['wall_clock_s']} s "

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -15,65 +15,65 @@ import yaml
 
 from nav_gym.config import EnvConfig
 from nav_gym.errors import TrainConfigError
-from nav_sim.config import SimConfig, convert
+from nav_sim.config import SimConfig, convert, setting
 from nav_sim.errors import ConfigError
 from nav_sim.sim_process import typed_params
 
 _ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
 
 
-def _f(default: Any, help: str) -> Any:
-    return field(default=default, metadata={'help': help})
-
-
 def _env(name: str) -> Any:
     """Declare a field with the default and description of the EnvConfig field ``name``."""
-    return _f(_ENV_FIELDS[name].default, _ENV_FIELDS[name].metadata['help'])
+    return setting(_ENV_FIELDS[name].default, _ENV_FIELDS[name].metadata['help'])
 
 
 @dataclass(frozen=True)
 class TrainConfig:
     """DQN('CnnPolicy') on Monitor(NavigationEnv); defaults are the workshop's."""
 
-    total_timesteps: int = _f(50_000, 'environment steps to train for')
-    learning_rate: float = _f(1e-4, 'optimiser step size')
-    buffer_size: int = _f(50_000, 'replay buffer capacity (transitions)')
-    learning_starts: int = _f(2_000, 'steps collected before gradient updates begin')
-    batch_size: int = _f(32, 'transitions per gradient step')
-    gamma: float = _f(0.99, 'discount factor')
-    train_freq: int = _f(4, 'environment steps between gradient updates (SB3 default)')
-    gradient_steps: int = _f(1, 'gradient steps per update (SB3 default)')
-    target_update_interval: int = _f(1_000, 'steps between target-network updates')
-    exploration_fraction: float = _f(0.25, 'fraction of training over which epsilon decays')
-    exploration_initial_eps: float = _f(1.0, 'initial epsilon (SB3 default)')
-    exploration_final_eps: float = _f(0.05, 'final epsilon')
-    seed: int = _f(9, 'seed of DQN, the env and its scenario sequence')
-    double_q: bool = _f(False, "Double DQN targets instead of the workshop's DQN (a diagnosis of "
-                        'overestimation, not the workshop learner; see nav_gym.double_dqn)')
-    checkpoint_freq: int = _f(10_000, 'steps between checkpoints (all are kept)')
-    save_replay_buffer: bool = _f(True, 'save the replay buffer with checkpoints (for --resume)')
-    keep_replay_buffer: bool = _f(False, 'keep checkpoints/replay_buffer.pkl when the run '
-                                  'finishes (it is only needed to resume; ~2 GB at 50k)')
-    device: str = _f('auto', "torch device: 'auto', 'cpu' or 'cuda'")
-    runs_dir: str = _f('runs', 'directory that holds one sub-directory per run')
-    run_name: str = _f('', "run directory name ('' = dqn_<date>_<time>)")
-    split: str = _f('train', 'scenario bank used for training')
-    max_episode_steps: int = _f(EnvConfig.max_episode_steps, 'control periods before an episode '
-                                'is truncated')
-    namespace: str = _f('', 'ROS namespace of the sim node')
-    sim: str = _f('auto', "'auto', 'attach' or 'embedded' (see EnvConfig)")
-    sim_timeout: float = _f(5.0, 'seconds to wait for the sim before failing')
+    total_timesteps: int = setting(50_000, 'environment steps to train for')
+    learning_rate: float = setting(1e-4, 'optimiser step size')
+    buffer_size: int = setting(50_000, 'replay buffer capacity (transitions)')
+    learning_starts: int = setting(2_000, 'steps collected before gradient updates begin')
+    batch_size: int = setting(32, 'transitions per gradient step')
+    gamma: float = setting(0.99, 'discount factor')
+    train_freq: int = setting(4, 'environment steps between gradient updates (SB3 default)')
+    gradient_steps: int = setting(1, 'gradient steps per update (SB3 default)')
+    target_update_interval: int = setting(1_000, 'steps between target-network updates')
+    exploration_fraction: float = setting(0.25, 'fraction of training over which epsilon decays')
+    exploration_initial_eps: float = setting(1.0, 'initial epsilon (SB3 default)')
+    exploration_final_eps: float = setting(0.05, 'final epsilon')
+    seed: int = setting(9, 'seed of DQN, the env and its scenario sequence')
+    double_q: bool = setting(False, "Double DQN targets instead of the workshop's DQN (a "
+                             'diagnosis of overestimation, not the workshop learner; see '
+                             'nav_gym.learner)')
+    checkpoint_freq: int = setting(10_000, 'steps between checkpoints (all are kept)')
+    save_replay_buffer: bool = setting(True, 'save the replay buffer with checkpoints (for '
+                                       '--resume)')
+    keep_replay_buffer: bool = setting(False, 'keep checkpoints/replay_buffer.pkl when the run '
+                                       'finishes (it is only needed to resume; ~2 GB at 50k)')
+    device: str = setting('auto', "torch device: 'auto', 'cpu' or 'cuda'")
+    runs_dir: str = setting('runs', 'directory that holds one sub-directory per run')
+    run_name: str = setting('', "run directory name ('' = dqn_<date>_<time>)")
+    split: str = setting('train', 'scenario bank used for training')
+    max_episode_steps: int = setting(EnvConfig.max_episode_steps, 'control periods before an '
+                                     'episode is truncated')
+    namespace: str = setting('', 'ROS namespace of the sim node')
+    sim: str = setting('auto', "'auto', 'attach' or 'embedded' (see EnvConfig)")
+    sim_timeout: float = setting(5.0, 'seconds to wait for the sim before failing')
     probe_timeout: float = _env('probe_timeout')
-    forward_speed: float = _f(EnvConfig.forward_speed, 'action 1 (forward): linear velocity, m/s')
-    turn_rate: float = _f(EnvConfig.turn_rate, 'actions 0/2: angular velocity, rad/s')
-    turn_speed: float = _f(EnvConfig.turn_speed, 'actions 0/2: linear velocity while turning, '
-                           'm/s (0: in place)')
+    forward_speed: float = setting(EnvConfig.forward_speed, 'action 1 (forward): linear '
+                                   'velocity, m/s')
+    turn_rate: float = setting(EnvConfig.turn_rate, 'actions 0/2: angular velocity, rad/s')
+    turn_speed: float = setting(EnvConfig.turn_speed, 'actions 0/2: linear velocity while '
+                                'turning, m/s (0: in place)')
     progress_weight: float = _env('progress_weight')
     step_penalty: float = _env('step_penalty')
     goal_reward: float = _env('goal_reward')
     collision_penalty: float = _env('collision_penalty')
-    sim_params: dict = _f(None, 'sim_node parameters for a sim the env starts itself, as a '
-                          'mapping (YAML) or JSON on the command line, e.g. \'{"sim_dt": 0.016}\'')
+    sim_params: dict = setting(None, 'sim_node parameters for a sim the env starts itself, as a '
+                               'mapping (YAML) or JSON on the command line, e.g. \'{"sim_dt": '
+                               "0.016}'")
 
     def __post_init__(self) -> None:
         """Check the values (a clear TrainConfigError for a bad one)."""

@@ -84,7 +84,11 @@ def ros_integer_problem(name: str, value: int) -> str | None:
     return f'{name} must be in [-2**63, 2**63) (a ROS integer parameter), got {value!r}'
 
 
-def _f(default: Any, help: str) -> Any:
+def setting(default: Any, help: str) -> Any:
+    """Declare a config dataclass field with its default and its one-line description.
+
+    The description is what the ROS parameter descriptor, the params file and ``--help`` say.
+    """
     return field(default=default, metadata={'help': help})
 
 
@@ -92,36 +96,39 @@ def _f(default: Any, help: str) -> Any:
 class SimConfig:
     """Parameters of the world, the robot, the camera and the task (no ROS)."""
 
-    world: str = _f('arena.xml', 'MJCF file: a path, or a name under share/nav_sim/worlds')
-    sim_dt: float = _f(0.032, 'physics timestep in seconds (Webots basicTimeStep default: 32 ms)')
-    action_repeat: int = _f(16, 'physics steps per control period (ctrl_dt = sim_dt * repeat)')
-    settle_steps: int = _f(2, 'physics steps with motors stopped after a reset')
-    wheel_radius: float = _f(0.0205, 'wheel radius in metres (e-puck: 2.05 cm)')
-    axle_length: float = _f(0.052, 'distance between the wheels in metres (e-puck: 5.2 cm)')
-    max_wheel_speed: float = _f(6.28, 'wheel speed limit in rad/s (e-puck: 6.28 rad/s)')
-    camera_width: int = _f(128, 'native camera image width in pixels')
-    camera_height: int = _f(96, 'native camera image height in pixels')
-    camera_hfov_deg: float = _f(90.0, 'horizontal field of view in degrees (e-puck: 0.84 rad = '
-                                '48°; a wide-angle lens by default)')
-    camera_near_clip: float = _f(0.005, 'camera near clipping distance in metres (surfaces '
-                                 'closer than this are not drawn)')
-    camera_mount_forward: float = _f(0.0, 'camera position ahead of the robot centre in metres '
-                                     "(0: on a mast over the centre; the e-puck's own camera "
-                                     'is at the front edge, 0.038)')
-    camera_mount_height: float = _f(0.10, 'camera height above the floor in metres (e-puck: '
-                                    '0.0455)')
-    camera_pitch_deg: float = _f(25.0, 'camera tilt below the horizontal in degrees (e-puck: '
-                                 '0, level)')
-    goal_radius: float = _f(0.1, 'success when the robot centre is this close to the goal (m)')
-    goal_marker_radius: float = _f(0.05, 'radius of the green goal cylinder in metres')
-    goal_marker_height: float = _f(0.3, 'height of the green goal cylinder in metres (a beacon '
-                                   'taller than the 16 cm obstacles)')
-    min_start_goal_distance: float = _f(0.6, 'minimum straight-line start-goal distance (m)')
-    num_obstacles: int = _f(3, 'obstacles per layout (at most the slots in the world)')
-    train_layouts: int = _f(20, 'number of layouts in the training bank')
-    heldout_layouts: int = _f(10, 'number of layouts in the held-out bank')
-    train_bank_seed: int = _f(1_000, 'seed that generates the training layout bank')
-    heldout_bank_seed: int = _f(2_000, 'seed that generates the held-out layout bank')
+    world: str = setting('arena.xml', 'MJCF file: a path, or a name under share/nav_sim/worlds')
+    sim_dt: float = setting(0.032, 'physics timestep in seconds (Webots basicTimeStep default: '
+                            '32 ms)')
+    action_repeat: int = setting(16, 'physics steps per control period (ctrl_dt = sim_dt * '
+                                 'repeat)')
+    settle_steps: int = setting(2, 'physics steps with motors stopped after a reset')
+    wheel_radius: float = setting(0.0205, 'wheel radius in metres (e-puck: 2.05 cm)')
+    axle_length: float = setting(0.052, 'distance between the wheels in metres (e-puck: 5.2 cm)')
+    max_wheel_speed: float = setting(6.28, 'wheel speed limit in rad/s (e-puck: 6.28 rad/s)')
+    camera_width: int = setting(128, 'native camera image width in pixels')
+    camera_height: int = setting(96, 'native camera image height in pixels')
+    camera_hfov_deg: float = setting(90.0, 'horizontal field of view in degrees (e-puck: 0.84 '
+                                     'rad = 48°; a wide-angle lens by default)')
+    camera_near_clip: float = setting(0.005, 'camera near clipping distance in metres (surfaces '
+                                      'closer than this are not drawn)')
+    camera_mount_forward: float = setting(0.0, 'camera position ahead of the robot centre in '
+                                          "metres (0: on a mast over the centre; the e-puck's "
+                                          'own camera is at the front edge, 0.038)')
+    camera_mount_height: float = setting(0.10, 'camera height above the floor in metres (e-puck: '
+                                         '0.0455)')
+    camera_pitch_deg: float = setting(25.0, 'camera tilt below the horizontal in degrees '
+                                      '(e-puck: 0, level)')
+    goal_radius: float = setting(0.1, 'success when the robot centre is this close to the goal '
+                                 '(m)')
+    goal_marker_radius: float = setting(0.05, 'radius of the green goal cylinder in metres')
+    goal_marker_height: float = setting(0.3, 'height of the green goal cylinder in metres (a '
+                                        'beacon taller than the 16 cm obstacles)')
+    min_start_goal_distance: float = setting(0.6, 'minimum straight-line start-goal distance (m)')
+    num_obstacles: int = setting(3, 'obstacles per layout (at most the slots in the world)')
+    train_layouts: int = setting(20, 'number of layouts in the training bank')
+    heldout_layouts: int = setting(10, 'number of layouts in the held-out bank')
+    train_bank_seed: int = setting(1_000, 'seed that generates the training layout bank')
+    heldout_bank_seed: int = setting(2_000, 'seed that generates the held-out layout bank')
 
     @property
     def ctrl_dt(self) -> float:
@@ -210,20 +217,20 @@ MODES = ('lockstep', 'realtime')
 class NodeConfig:
     """Settings of the ``sim_node`` ROS adapter (the simulation itself is in SimConfig)."""
 
-    mode: str = _f('lockstep', "'lockstep': one cmd_vel = one control period; 'realtime': "
-                   'free-running at wall-clock rate with the latest cmd_vel')
-    seed: int = _f(0, 'scenario seed used by the next reset (non-negative integer)')
-    split: str = _f('train', "scenario bank used by the next reset: 'train' or 'heldout'")
-    reset_on_start: bool = _f(True, 'load the scenario of (seed, split) when the node starts')
-    realtime_rate: float = _f(1.0, 'realtime mode: simulated seconds per wall-clock second')
-    cmd_vel_timeout: float = _f(0.5, 'realtime mode: stop the motors after this long (wall '
-                                'seconds) without a cmd_vel')
-    publish_clock: bool = _f(True, 'publish sim time on /clock')
-    odom_frame: str = _f('odom', 'frame of the odometry and goal pose')
-    base_frame: str = _f('base_link', 'frame of the robot body')
-    camera_frame: str = _f('camera_optical_frame', 'optical frame of the camera images')
-    live_port: int = _f(0, 'serve a Foxglove live view (camera, 3D scene, events, /diagnostics) '
-                        'on ws://localhost:PORT; 0 = off')
+    mode: str = setting('lockstep', "'lockstep': one cmd_vel = one control period; 'realtime': "
+                        'free-running at wall-clock rate with the latest cmd_vel')
+    seed: int = setting(0, 'scenario seed used by the next reset (non-negative integer)')
+    split: str = setting('train', "scenario bank used by the next reset: 'train' or 'heldout'")
+    reset_on_start: bool = setting(True, 'load the scenario of (seed, split) when the node starts')
+    realtime_rate: float = setting(1.0, 'realtime mode: simulated seconds per wall-clock second')
+    cmd_vel_timeout: float = setting(0.5, 'realtime mode: stop the motors after this long (wall '
+                                     'seconds) without a cmd_vel')
+    publish_clock: bool = setting(True, 'publish sim time on /clock')
+    odom_frame: str = setting('odom', 'frame of the odometry and goal pose')
+    base_frame: str = setting('base_link', 'frame of the robot body')
+    camera_frame: str = setting('camera_optical_frame', 'optical frame of the camera images')
+    live_port: int = setting(0, 'serve a Foxglove live view (camera, 3D scene, events, '
+                             '/diagnostics) on ws://localhost:PORT; 0 = off')
 
     def __post_init__(self) -> None:
         """Refuse values the node cannot run with (ConfigError)."""

@@ -3,7 +3,11 @@
 from __future__ import annotations
 
 
-class NavSimError(Exception):
+class VisnavError(Exception):
+    """Base class of every visnav error: the commands print one as a one-line message."""
+
+
+class NavSimError(VisnavError):
     """Base class of every nav_sim error."""
 
 

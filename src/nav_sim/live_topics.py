@@ -2,7 +2,7 @@
 
 One definition of the visualisation topics, their ROS 2 types and their CDR bytes, shared by the
 sim node's live view, the trainer's and evaluator's live view (:mod:`nav_sim.live`) and the
-evaluation bags (:mod:`nav_eval.bag_recorder`), so that one Foxglove layout
+evaluation bags (:mod:`nav_eval.recording.recorder`), so that one Foxglove layout
 (``config/foxglove/visnav.json``) serves a live connection and a recorded bag.
 
 Messages are ``rosbags`` dataclasses serialized to CDR by its typestore (ROS 2 Jazzy types plus
@@ -217,42 +217,26 @@ class ArenaScene:
     camera_half_vfov: float   # radians
 
     @classmethod
-    def from_world(cls, world: Any) -> ArenaScene:
-        """Read walls, obstacle slots, goal, robot and camera from a :class:`World`."""
-        import mujoco
-        m, cfg = world.model, world.config
-        walls = []
-        for geom in range(m.ngeom):
-            name = m.geom(geom).name
-            if name.startswith('wall') and m.geom_type[geom] == mujoco.mjtGeom.mjGEOM_BOX:
-                pos, size = m.geom_pos[geom], m.geom_size[geom]
-                walls.append(Box(*(float(v) for v in (*pos, *size))))
-        slots = []
-        for geom in world.obstacle_geoms:
-            size = m.geom_size[geom]
-            if m.geom_type[geom] == mujoco.mjtGeom.mjGEOM_CYLINDER:
-                slots.append(SlotShape('cylinder', float(size[0]), float(size[0]),
-                                       float(size[1])))
-            else:
-                slots.append(SlotShape('box', float(size[0]), float(size[1]), float(size[2])))
-        robot = world.robot_geom
-        return cls(world.geometry.half_size, tuple(walls), tuple(slots), cfg.goal_marker_radius,
-                   cfg.goal_marker_height, cfg.goal_radius, float(m.geom_size[robot][0]),
-                   2.0 * float(m.geom_size[robot][1]) + float(m.geom_pos[robot][2]),
-                   cfg.camera_mount_forward, cfg.camera_mount_height,
-                   math.radians(cfg.camera_pitch_deg), math.radians(cfg.camera_hfov_deg) / 2.0,
+    def from_geometry(cls, geometry: Any, cfg: Any) -> ArenaScene:
+        """Build the scene of an arena (``ArenaGeometry``) and its SimConfig ``cfg``."""
+        slots = tuple(SlotShape(s.kind, s.half_x, s.half_y, s.half_z) for s in geometry.shapes)
+        return cls(geometry.half_size, tuple(Box(*wall) for wall in geometry.walls), slots,
+                   cfg.goal_marker_radius, cfg.goal_marker_height, cfg.goal_radius,
+                   geometry.robot_radius, geometry.robot_height, cfg.camera_mount_forward,
+                   cfg.camera_mount_height, math.radians(cfg.camera_pitch_deg),
+                   math.radians(cfg.camera_hfov_deg) / 2.0,
                    math.radians(cfg.camera_fovy_deg) / 2.0)
+
+    @classmethod
+    def from_world(cls, world: Any) -> ArenaScene:
+        """Build the scene of a loaded :class:`nav_sim.world.World`."""
+        return cls.from_geometry(world.geometry, world.config)
 
 
 def arena_for(sim_params: dict[str, Any] | None = None) -> ArenaScene:
     """Return the :class:`ArenaScene` of a sim parameter mapping (loads the MJCF only)."""
-    from nav_sim.config import SimConfig
-    from nav_sim.world import World
-    world = World(SimConfig.from_params(dict(sim_params or {})))
-    try:
-        return ArenaScene.from_world(world)
-    finally:
-        world.close()
+    from nav_sim.world import load_arena
+    return ArenaScene.from_geometry(*load_arena(sim_params))
 
 
 ODOM_FRAME = 'odom'

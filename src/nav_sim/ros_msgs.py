@@ -40,11 +40,6 @@ def yaw_quaternion(yaw: float) -> Quaternion:
     return Quaternion(x=0.0, y=0.0, z=math.sin(yaw / 2.0), w=math.cos(yaw / 2.0))
 
 
-def quaternion_yaw(q: Quaternion) -> float:
-    """Return the yaw (rotation about z, radians) of a quaternion."""
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-
-
 def image_msg(rgb: np.ndarray, stamp: Time, frame_id: str) -> Image:
     """Build an ``rgb8`` Image from an (H, W, 3) uint8 array."""
     height, width, _ = rgb.shape

@@ -36,6 +36,7 @@ class ObstacleShape:
     kind: str
     half_x: float
     half_y: float
+    half_z: float = 0.0  # half its height (the live view draws it; sampling needs none)
 
     @property
     def bounding_radius(self) -> float:
@@ -45,11 +46,17 @@ class ObstacleShape:
 
 @dataclass(frozen=True)
 class ArenaGeometry:
-    """What scenario sampling needs to know about the world."""
+    """The world's arena as its MJCF defines it, read once (``nav_sim.world.World``).
+
+    Scenario sampling needs the size, the robot's radius and the slots' footprints; the live
+    view also draws the walls (boxes: centre x, y, z and half extents) and the robot's height.
+    """
 
     half_size: float
     robot_radius: float
     shapes: tuple[ObstacleShape, ...]
+    walls: tuple[tuple[float, float, float, float, float, float], ...] = ()
+    robot_height: float = 0.0
 
 
 @dataclass(frozen=True)

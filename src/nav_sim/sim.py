@@ -22,7 +22,6 @@ from nav_sim.scenarios import Scenario, build_banks, sample_scenario
 from nav_sim.world import World
 
 EVENT_NONE, EVENT_GOAL, EVENT_COLLISION = 'none', 'goal', 'collision'
-EVENTS = (EVENT_NONE, EVENT_GOAL, EVENT_COLLISION)
 
 
 @dataclass(frozen=True)

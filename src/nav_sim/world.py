@@ -8,6 +8,7 @@ No task logic here (see ``scenarios.py`` and ``sim.py``).  Rendering is offscree
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -85,20 +86,25 @@ class World:
             index += 1
 
     def _arena_geometry(self) -> ArenaGeometry:
+        """Read the arena from the model: the one place its MuJoCo geometry is read."""
         m = self.model
         shapes = []
         for geom in self.obstacle_geoms:
             size = m.geom_size[geom]
             if m.geom_type[geom] == mujoco.mjtGeom.mjGEOM_CYLINDER:
                 shapes.append(ObstacleShape(m.geom(geom).name, 'cylinder', float(size[0]),
-                                            float(size[0])))
+                                            float(size[0]), float(size[1])))
             else:
                 shapes.append(ObstacleShape(m.geom(geom).name, 'box', float(size[0]),
-                                            float(size[1])))
+                                            float(size[1]), float(size[2])))
+        walls = tuple(tuple(float(v) for v in (*m.geom_pos[geom], *m.geom_size[geom]))
+                      for geom in range(m.ngeom) if m.geom(geom).name.startswith('wall')
+                      and m.geom_type[geom] == mujoco.mjtGeom.mjGEOM_BOX)
         wall = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, 'wall_east')
         half_size = float(m.geom_pos[wall][0] - m.geom_size[wall][0])
-        robot_radius = float(m.geom_size[self.robot_geom][0])
-        return ArenaGeometry(half_size, robot_radius, tuple(shapes))
+        robot = self.robot_geom
+        return ArenaGeometry(half_size, float(m.geom_size[robot][0]), tuple(shapes), walls,
+                             2.0 * float(m.geom_size[robot][1]) + float(m.geom_pos[robot][2]))
 
     # --- placing things -------------------------------------------------------------------
     def set_layout(self, layout: Layout) -> None:
@@ -171,6 +177,16 @@ class World:
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
+
+
+def load_arena(sim_params: dict[str, Any] | None = None) -> tuple[ArenaGeometry, SimConfig]:
+    """Return the arena of a sim parameter mapping and its SimConfig (loads the MJCF only)."""
+    config = SimConfig.from_params(dict(sim_params or {}))
+    world = World(config)
+    try:
+        return world.geometry, config
+    finally:
+        world.close()
 
 
 def _consecutive(addresses: list[int], what: str) -> slice:

@@ -7,8 +7,8 @@ import json
 import numpy as np
 import pytest
 
-from nav_eval import anatomy
-from nav_gym import run_dir as layout
+from nav_eval.analysis import anatomy
+from nav_gym.run_dir import frames_path, read_traces, trace_path
 
 L, F, R = 0, 1, 2
 
@@ -61,16 +61,16 @@ def test_summary_per_outcome():
 
 def test_a_set_is_read_from_its_traces(tmp_path):
     for seed, outcome in ((201, 'success'), (202, 'timeout')):
-        path = layout.trace_path(tmp_path, 'dqn_heldout', seed)
+        path = trace_path(tmp_path, 'dqn_heldout', seed)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(trace(seed, outcome, [F, F])))
-        np.savez_compressed(layout.frames_path(path), obs=frames_with_goal([True, True, True]))
-    eps = anatomy.traces_anatomy(layout.read_traces(tmp_path, 'dqn_heldout'))
+        np.savez_compressed(frames_path(path), obs=frames_with_goal([True, True, True]))
+    eps = anatomy.traces_anatomy(read_traces(tmp_path, 'dqn_heldout'))
     assert [(e.seed, e.outcome, e.in_view) for e in eps] == [(201, 'success', 2),
                                                              (202, 'timeout', 2)]
     assert [e.seed for e in anatomy.traces_anatomy(
-        layout.read_traces(tmp_path, 'dqn_heldout', [202, 203]))] == [202]
-    assert anatomy.traces_anatomy(layout.read_traces(tmp_path, 'dqn_train')) == []
+        read_traces(tmp_path, 'dqn_heldout', [202, 203]))] == [202]
+    assert anatomy.traces_anatomy(read_traces(tmp_path, 'dqn_train')) == []
 
 
 def test_frames_that_do_not_match_the_decisions_are_refused():

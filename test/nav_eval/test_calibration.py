@@ -8,8 +8,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from nav_eval import calibration
-from nav_gym import run_dir as layout
+from nav_eval.analysis import calibration
+from nav_gym.run_dir import trace_path
 from nav_gym.train_config import TrainConfig
 
 WORKSHOP = TrainConfig()  # gamma 0.99, goal +5, 2 per metre of progress, -0.01 a step, -1
@@ -100,15 +100,15 @@ def test_summary_of_a_known_overestimate_near_and_far_and_above_the_bound():
 
 def test_a_set_is_read_from_its_traces(tmp_path):
     for seed, outcome in ((201, 'success'), (202, 'timeout'), (203, 'collision')):
-        path = layout.trace_path(tmp_path, 'dqn_heldout', seed)
+        path = trace_path(tmp_path, 'dqn_heldout', seed)
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps(trace(seed, outcome, [(1, [0.0, 3.0, 0.0], 1.0, 0.5)])))
-    bad = layout.trace_path(tmp_path, 'dqn_heldout', 204)
+    bad = trace_path(tmp_path, 'dqn_heldout', 204)
     bad.write_text('{"seed": 204, "outcome": "success"')  # cut short: left out
-    layout.trace_path(tmp_path, 'dqn_heldout', 205).write_text('[205]')  # not a trace
-    layout.trace_path(tmp_path, 'dqn_heldout', 206).write_text('{"seed": [206]}')  # nor this
+    trace_path(tmp_path, 'dqn_heldout', 205).write_text('[205]')  # not a trace
+    trace_path(tmp_path, 'dqn_heldout', 206).write_text('{"seed": [206]}')  # nor this
     wrong = trace(207, 'success', [(-1, [0.0, 3.0, 0.0], 1.0, 0.5)])  # no such action
-    layout.trace_path(tmp_path, 'dqn_heldout', 207).write_text(json.dumps(wrong))
+    trace_path(tmp_path, 'dqn_heldout', 207).write_text(json.dumps(wrong))
     episodes = calibration.set_values(tmp_path, 'dqn_heldout', WORKSHOP)
     assert [(e.seed, e.outcome) for e in episodes] == [
         (201, 'success'), (202, 'timeout'), (203, 'collision')]
@@ -118,7 +118,7 @@ def test_a_set_is_read_from_its_traces(tmp_path):
 
 
 def test_sweep_rows_per_seed_then_pooled_named_by_their_seeds():
-    from nav_eval.sweep_report import _calibration_markdown, calibration_rows
+    from nav_eval.sweeps.report import _calibration_markdown, calibration_rows
 
     one = values(1, 'success', [6.0], [4.0], [0.5])
     two = values(2, 'collision', [2.0], [-1.0], [0.1])

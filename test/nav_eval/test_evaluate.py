@@ -13,8 +13,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nav_eval import diagnose, evaluate, report
+from nav_eval import seeds
 from nav_eval.errors import EvaluationError
+from nav_eval.evaluation import runner
+from nav_eval.evaluation.sets import DEFAULT_SETS, plan_sets, run_config
+from nav_eval.reporting import run_report
+from nav_eval.reporting.diagnosis_report import diagnose_run
 from nav_gym.train_config import TrainConfig
 
 SETS = ['random_train', 'dqn_heldout', 'early_train', 'explore_heldout']
@@ -39,14 +43,13 @@ def run_dir(tmp_path_factory, spaces_only) -> Path:
 
 @pytest.fixture(scope='module')
 def evaluated(run_dir) -> dict:
-    sets = evaluate.plan_sets(run_dir, SETS, (101, 102), (201, 202))
-    return evaluate.evaluate(run_dir, sets, record=True)
+    sets = plan_sets(run_dir, SETS, (101, 102), (201, 202))
+    return runner.evaluate(run_dir, sets, record=True)
 
 
 def test_plan_uses_the_first_checkpoint_after_step_zero_as_early(run_dir):
-    sets = evaluate.plan_sets(run_dir, list(evaluate.DEFAULT_SETS), evaluate.TRAIN_SEEDS,
-                              evaluate.HELDOUT_SEEDS)
-    assert [s.name for s in sets] == list(evaluate.DEFAULT_SETS)
+    sets = plan_sets(run_dir, list(DEFAULT_SETS), seeds.WORKSHOP_TRAIN, seeds.WORKSHOP_HELDOUT)
+    assert [s.name for s in sets] == list(DEFAULT_SETS)
     by_name = {s.name: s for s in sets}
     assert by_name['early_heldout'].checkpoint == 'checkpoints/dqn_32_steps.zip'
     assert by_name['dqn_train'].seeds == tuple(range(101, 111))
@@ -55,7 +58,7 @@ def test_plan_uses_the_first_checkpoint_after_step_zero_as_early(run_dir):
 
 
 def test_the_exploring_diagnosis_is_the_greedy_policy_plus_seeded_random_actions(run_dir):
-    from nav_eval.policies import DQNPolicy, ExploringDQNPolicy
+    from nav_eval.evaluation.policies import DQNPolicy, ExploringDQNPolicy
     model = run_dir / 'final_model.zip'
     obs = np.random.default_rng(0).integers(0, 256, (3, 84, 84), dtype=np.uint8)
     never, always = ExploringDQNPolicy(model, 0.0), ExploringDQNPolicy(model, 1.0)
@@ -70,8 +73,8 @@ def test_the_exploring_diagnosis_is_the_greedy_policy_plus_seeded_random_actions
     with pytest.raises(EvaluationError, match='epsilon'):
         ExploringDQNPolicy(model, 1.5)
     # a diagnosis on request, never part of the workshop's (deterministic) evaluation
-    assert not [n for n in evaluate.DEFAULT_SETS if n.startswith('explore')]
-    [planned] = evaluate.plan_sets(run_dir, ['explore_heldout'], (101,), (201,))
+    assert not [n for n in DEFAULT_SETS if n.startswith('explore')]
+    [planned] = plan_sets(run_dir, ['explore_heldout'], (101,), (201,))
     assert (planned.policy, planned.checkpoint) == ('explore', 'final_model.zip')
 
 
@@ -81,8 +84,8 @@ def test_an_explore_set_acts_with_the_runs_own_epsilon_and_replays_exactly(run_d
     (run / 'config.yaml').write_text(
         TrainConfig(max_episode_steps=15, exploration_final_eps=0.5).to_yaml())
     (run / 'final_model.zip').write_bytes((run_dir / 'final_model.zip').read_bytes())
-    sets = evaluate.plan_sets(run, ['explore_heldout'], (101,), (201, 202))
-    [entry] = evaluate.evaluate(run, sets, record=False)['sets']
+    sets = plan_sets(run, ['explore_heldout'], (101,), (201, 202))
+    [entry] = runner.evaluate(run, sets, record=False)['sets']
     assert entry['epsilon'] == 0.5
     trace = json.loads((run / 'eval' / 'traces' / 'explore_heldout' / 'seed_201.json')
                        .read_text())
@@ -90,20 +93,20 @@ def test_an_explore_set_acts_with_the_runs_own_epsilon_and_replays_exactly(run_d
     # half of the actions are drawn at random: some differ from the greedy choice
     assert any(s['action'] != int(np.argmax(s['q_values'])) for s in trace['steps'])
     # ... and the same seed draws them again (the diagnosis re-run relies on it)
-    assert diagnose.rerun(run, trace) == [s['action'] for s in trace['steps']]
-    assert report.checkpoint_name(entry) == 'final_model.zip, ε = 0.5'
+    assert runner.rerun(run, trace) == [s['action'] for s in trace['steps']]
+    assert run_report.checkpoint_name(entry) == 'final_model.zip, ε = 0.5'
 
 
 def test_bad_requests_are_clear_errors(run_dir, tmp_path):
     with pytest.raises(EvaluationError, match='unknown evaluation set'):
-        evaluate.plan_sets(run_dir, ['dqn_validation'], (1,), (2,))
+        plan_sets(run_dir, ['dqn_validation'], (1,), (2,))
     with pytest.raises(EvaluationError, match='bad seed list'):
-        evaluate.parse_seeds('101-x')
-    assert evaluate.parse_seeds('101-103,110') == (101, 102, 103, 110)
+        seeds.parse_seeds('101-x')
+    assert seeds.parse_seeds('101-103,110') == (101, 102, 103, 110)
     with pytest.raises(EvaluationError, match='not a training run'):
-        evaluate.run_config(tmp_path)
+        run_config(tmp_path)
     with pytest.raises(EvaluationError, match='not found'):
-        evaluate.plan_sets(run_dir, ['dqn_train'], (1,), (2,), final='missing.zip')
+        plan_sets(run_dir, ['dqn_train'], (1,), (2,), final='missing.zip')
 
 
 def test_results_files_and_metrics(run_dir, evaluated):
@@ -136,7 +139,7 @@ def test_results_files_and_metrics(run_dir, evaluated):
 
 
 def test_every_set_is_recorded_as_an_mcap_bag(run_dir, evaluated):
-    from nav_eval.bags import episodes_in_bag, read_bag
+    from nav_eval.recording.bags import episodes_in_bag, read_bag
     bag = run_dir / 'eval' / 'bags' / 'dqn_heldout'
     assert 'mcap' in (bag / 'metadata.yaml').read_text()
     annotations = episodes_in_bag(bag)
@@ -152,15 +155,15 @@ def test_every_set_is_recorded_as_an_mcap_bag(run_dir, evaluated):
 
 
 def test_the_same_evaluation_twice_gives_identical_tables(run_dir, evaluated, tmp_path):
-    sets = evaluate.plan_sets(run_dir, SETS, (101, 102), (201, 202))
-    again = evaluate.evaluate(run_dir, sets, out=tmp_path / 'again', record=False)
+    sets = plan_sets(run_dir, SETS, (101, 102), (201, 202))
+    again = runner.evaluate(run_dir, sets, out=tmp_path / 'again', record=False)
     assert again['sets'] == evaluated['sets']
     for name in ('results.md', 'episodes.csv'):
         assert (tmp_path / 'again' / name).read_text() == (run_dir / 'eval' / name).read_text()
 
 
 def test_diagnosis_of_a_failed_episode(run_dir, evaluated):
-    result = diagnose.run(run_dir)
+    result = diagnose_run(run_dir)
     assert result['set'] == 'dqn_heldout' and result['outcome'] != 'success'
     status = {v['layer']: v['status'] for v in result['layers']}
     assert status['action timing'] == 'ok' and status['reward'] == 'ok'
@@ -207,8 +210,8 @@ def test_evaluate_command_reports_errors_without_traceback(tmp_path, run_dir):
 
 def test_a_reversed_seed_range_is_rejected():
     with pytest.raises(EvaluationError, match="bad seed range '5-1'"):
-        evaluate.parse_seeds('5-1,207')
-    assert evaluate.parse_seeds('5-5,207') == (5, 207)
+        seeds.parse_seeds('5-1,207')
+    assert seeds.parse_seeds('5-5,207') == (5, 207)
 
 
 def test_the_bags_replay_the_foxglove_layout(run_dir, evaluated):
@@ -217,7 +220,7 @@ def test_the_bags_replay_the_foxglove_layout(run_dir, evaluated):
     The live-only ones are the training statistics and /diagnostics; the scene, robot and step
     topics follow the episodes, with the live view's types.
     """
-    from nav_eval.bags import read_bag
+    from nav_eval.recording.bags import read_bag
     from nav_sim import live_topics
     from nav_sim.live_layout import LIVE_ONLY_TOPICS, referenced_topics
     layout = json.loads((Path(__file__).resolve().parents[2] / 'config' / 'foxglove'

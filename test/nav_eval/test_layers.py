@@ -7,8 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from nav_eval import layers
-from nav_eval.diagnose import diagnose
+from nav_eval.analysis import failure_layers as layers
+from nav_eval.analysis.diagnosis import diagnose
 from nav_gym.config import EnvConfig
 from nav_sim.config import SimConfig
 
@@ -161,8 +161,8 @@ def test_nondeterministic_evaluation_and_settings_mismatch_are_broken():
 def test_the_diagnosed_failure_is_the_final_models_first_then_the_early_checkpoints(tmp_path):
     import json
 
-    from nav_eval.diagnose import pick_episode
     from nav_eval.errors import DiagnosisError
+    from nav_eval.evaluation.selection import pick_episode
 
     def write(outcomes: dict) -> None:
         sets = [{'name': name, 'episodes': [{'seed': 201 + i, 'outcome': o}
@@ -186,7 +186,7 @@ def test_diagnosis_checks_a_run_against_its_own_reward_weights(tmp_path):
     """A run trained with other reward weights: its rewards are right by its own config."""
     import json
 
-    from nav_eval.diagnose import run
+    from nav_eval.reporting.diagnosis_report import diagnose_run
     from nav_gym.run_dir import frames_path, trace_path
     from nav_gym.train_config import TrainConfig
 
@@ -206,7 +206,7 @@ def test_diagnosis_checks_a_run_against_its_own_reward_weights(tmp_path):
     np.savez_compressed(frames_path(path), obs=frames)
     (tmp_path / 'eval' / 'results.json').write_text(json.dumps({'sets': [
         {'name': 'dqn_heldout', 'episodes': [{'seed': 201, 'outcome': 'collision'}]}]}))
-    status = {v['layer']: v['status'] for v in run(tmp_path, replay=False)['layers']}
+    status = {v['layer']: v['status'] for v in diagnose_run(tmp_path, replay=False)['layers']}
     assert status['reward'] == 'ok'
     # the same episode judged by the default weights would not follow the formula
     assert layers.check_reward(trace['steps'], trace['scenario']['initial_distance'], {

@@ -7,8 +7,8 @@ import io
 
 import pytest
 
-from nav_eval import metrics
-from nav_eval.metrics import episode_result, outcome_of, spl, summarize
+from nav_eval.analysis import metrics
+from nav_eval.analysis.metrics import episode_result, outcome_of, spl, summarize
 
 
 def test_spl_is_habitat_definition():

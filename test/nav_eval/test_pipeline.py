@@ -12,7 +12,7 @@ import sys
 
 import pytest
 
-from nav_eval.report import SECTIONS
+from nav_eval.reporting.run_report import SECTIONS
 
 TINY = ['--total-timesteps', '200', '--learning-starts', '100', '--checkpoint-freq', '100',
         '--buffer-size', '500', '--max-episode-steps', '12']

@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import importlib.util
-import itertools
-import os
+import math
 import signal
 import subprocess
 import sys
 import time
 from collections import Counter
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -24,8 +22,9 @@ from rclpy.signals import SignalHandlerOptions
 from rosbags.typesys import Stores, get_typestore
 from rosgraph_msgs.msg import Clock
 
-from nav_eval.bag_recorder import BagRecorder, bag_qos
-from nav_eval.bags import (
+from helpers import wait_until
+from nav_eval.errors import RecordingError
+from nav_eval.recording.bags import (
     EPISODE_TOPIC,
     PERIOD_TOPICS,
     SIM_TOPICS,
@@ -34,8 +33,8 @@ from nav_eval.bags import (
     episodes_in_bag,
     read_bag,
 )
-from nav_eval.errors import RecordingError
-from nav_eval.record import format_counts
+from nav_eval.recording.recorder import BagRecorder, bag_qos
+from nav_eval.recording.session import format_counts
 from nav_gym.cli import strip_ros_args
 from nav_sim import qos
 from nav_sim.client import SimClient
@@ -45,22 +44,6 @@ STEPS = 10
 MCAP_MAGIC = b'\x89MCAP0\r\n'
 #: no reset at start-up: nothing is published before a test drives the sim
 QUIET_START = {'publish_clock': True, 'reset_on_start': False}
-_names = itertools.count()
-
-
-@pytest.fixture
-def namespace() -> str:
-    """Return a namespace no other test (or test run) uses."""
-    return f'/rec{os.getpid()}_{next(_names)}'
-
-
-def wait_until(predicate: Callable[[], bool], timeout: float) -> bool:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.02)
-    return True
 
 
 def header_ns(msg: object) -> int:
@@ -102,15 +85,21 @@ def warm_up(client: SimClient, recorder: BagRecorder) -> None:
     recorder has matched the sim's publishers; what it publishes in between is lost.
     """
     frame, _ = client.reset(seed=7)
-    for _ in range(100):
+
+    def whole_period_recorded() -> bool:
+        nonlocal frame
         if recorder.wait_for(frame.stamp_ns, 0.1, (*PERIOD_TOPICS, '/clock')):
-            return
+            return True
         frame = client.step(0.0, 0.0, frame)
-    pytest.fail('the sim never delivered a whole control period to the recorder')
+        return False
+
+    wait_until(whole_period_recorded, 30.0, 'a whole control period of the sim at the recorder',
+               interval=0)
 
 
-def since(messages: list[tuple[int, object]], start: int) -> list[tuple[int, object]]:
-    return [(t, m) for t, m in messages if t >= start]
+def since(messages: list[tuple[int, object]], start: int, end: float = math.inf
+          ) -> list[tuple[int, object]]:
+    return [(t, m) for t, m in messages if start <= t <= end]
 
 
 def check_periods(messages: dict, episode: dict, namespace: str, stamps: list[int]) -> None:
@@ -138,7 +127,8 @@ def test_bag_holds_every_topic_of_a_lockstep_episode(tmp_path, namespace):
             SimClient(namespace, timeout=15.0) as client:
         client.wait_for_sim(30.0)
         assert recorder.wait_for_publishers(15.0, (*SIM_TOPICS, '/clock'))
-        assert wait_until(lambda: client.pub_cmd.get_subscription_count() >= 2, 15.0)
+        wait_until(lambda: client.pub_cmd.get_subscription_count() >= 2, 15.0,
+                   'cmd_vel matched by the sim and the recorder')
         warm_up(client, recorder)
         frame, scenario = client.reset(seed=101, split='train')
         stamps = [frame.stamp_ns]
@@ -148,6 +138,10 @@ def test_bag_holds_every_topic_of_a_lockstep_episode(tmp_path, namespace):
             assert recorder.wait_for(frame.stamp_ns, 5.0)
         assert not recorder.wait_for(frame.stamp_ns + 1, 0.2)  # no frame without a command
         recorder.annotate(info)
+        # not even a late one: one topic keeps its order, so a frame the sim had published
+        # since would reach the bag before the frame of one more command, the marker
+        marker = client.step(0.0, 0.0, frame)
+        assert recorder.wait_for(marker.stamp_ns, 5.0, (*PERIOD_TOPICS, '/clock'))
     recorder.close()  # idempotent
     counts = recorder.counts
     mcap_file = check_metadata(bag, counts)
@@ -155,12 +149,15 @@ def test_bag_holds_every_topic_of_a_lockstep_episode(tmp_path, namespace):
     messages = read_bag(bag)
     assert {topic: len(msgs) for topic, msgs in messages.items()} == counts
     start = stamps[0]
-    episode = {topic: since(msgs, start) for topic, msgs in messages.items()}
+    episode = {topic: since(msgs, start, stamps[-1]) for topic, msgs in messages.items()}
 
     check_periods(messages, episode, namespace, stamps)
-    commands = episode[f'{namespace}/cmd_vel']
-    assert len(commands) == STEPS
-    assert all((m.linear.x, m.angular.z) == (0.02, 0.3) for _, m in commands)
+    for topic in [f'{namespace}/{name}' for name in PERIOD_TOPICS] + ['/clock']:
+        assert [t for t, _ in since(messages[topic], stamps[-1] + 1)] == [marker.stamp_ns], topic
+    # the episode's commands, then the marker's (stamped with the newest sim time it met)
+    commands = since(messages[f'{namespace}/cmd_vel'], start)
+    assert [(m.linear.x, m.angular.z) for _, m in commands] == [(0.02, 0.3)] * STEPS + [
+        (0.0, 0.0)]
     times = [t for t, _ in messages[f'{namespace}/cmd_vel']]
     sim_times = {t for topic, msgs in messages.items() for t, _ in msgs
                  if topic not in (f'{namespace}/cmd_vel', EPISODE_TOPIC)}
@@ -168,7 +165,7 @@ def test_bag_holds_every_topic_of_a_lockstep_episode(tmp_path, namespace):
 
     goal = episode[f'{namespace}/goal_pose'][-1][1].pose.position
     assert (goal.x, goal.y) == pytest.approx(scenario['goal'], abs=1e-4)
-    events = [e for t, e in episode_events(bag) if t >= start]
+    events = [e for t, e in episode_events(bag) if start <= t <= stamps[-1]]
     assert [e['event'] for e in events] == ['reset'] + ['none'] * STEPS
     assert (events[0]['seed'], events[0]['split']) == (101, 'train')
     assert [e['episode_step'] for e in events] == list(range(STEPS + 1))
@@ -209,18 +206,25 @@ def test_record_command_stops_on_sigint_and_leaves_a_readable_bag(tmp_path, name
         process, out, err = start_record_command(
             tmp_path, str(bag), '--namespace', namespace, '--ros-args', '-r', '__node:=x')
         try:
-            assert wait_until(lambda: 'publishers matched' in out.read_text(), 30.0), \
-                err.read_text()
+            wait_until(lambda: 'publishers matched' in out.read_text(), 30.0,
+                       'the record command matching the sim', details=err.read_text)
             with SimClient(namespace, timeout=15.0) as client:
                 client.wait_for_sim(30.0)
-                assert wait_until(lambda: client.pub_cmd.get_subscription_count() >= 2, 15.0)
+                wait_until(lambda: client.pub_cmd.get_subscription_count() >= 2, 15.0,
+                           'cmd_vel matched by the sim and the record command')
                 # drive until the command says every topic reaches it: then the sim has
                 # matched its subscriptions too (see warm_up)
                 frame, _ = client.reset(seed=7)
-                deadline = time.monotonic() + 30.0
-                while 'receiving every nav_sim topic' not in out.read_text():
-                    assert time.monotonic() < deadline, err.read_text()
+
+                def every_topic_recorded() -> bool:
+                    nonlocal frame
+                    if 'receiving every nav_sim topic' in out.read_text():
+                        return True
                     frame = client.step(0.0, 0.0, frame)
+                    return False
+
+                wait_until(every_topic_recorded, 30.0, 'every nav_sim topic at the command',
+                           interval=0, details=err.read_text)
                 frame, _ = client.reset(seed=103)
                 stamps = [frame.stamp_ns]
                 for _ in range(steps):
@@ -305,16 +309,20 @@ def test_unstamped_messages_wait_for_the_first_sim_stamp(tmp_path, namespace):
         pub_clock = node.create_publisher(Clock, '/clock', profile)
         with BagRecorder(bag, namespace) as recorder:
             assert recorder.wait_for_publishers(15.0, ('cmd_vel', '/clock'))
-            assert wait_until(lambda: pub_cmd.get_subscription_count() >= 1
-                              and pub_clock.get_subscription_count() >= 1, 15.0)
+            wait_until(lambda: pub_cmd.get_subscription_count() >= 1
+                       and pub_clock.get_subscription_count() >= 1, 15.0,
+                       'cmd_vel and /clock matched by the recorder')
             for x in (0.1, 0.2):
                 pub_cmd.publish(Twist(linear=Vector3(x=x)))
             recorder.annotate({'early': True})
-            time.sleep(0.2)
+            # the recorder took both commands from the graph (it handles one message at a
+            # time, so the first went all the way), yet wrote nothing
+            wait_until(lambda: recorder.received == 2, 5.0, 'the early commands at the recorder')
             assert set(recorder.counts.values()) == {0}  # held: no sim time yet
             pub_clock.publish(Clock(clock=Time(sec=5)))
             pub_cmd.publish(Twist(linear=Vector3(x=0.3)))
-            assert wait_until(lambda: recorder.counts[f'{namespace}/cmd_vel'] == 3, 5.0)
+            wait_until(lambda: recorder.counts[f'{namespace}/cmd_vel'] == 3, 5.0,
+                       'the three commands in the bag')
     finally:
         context.try_shutdown()
     messages = read_bag(bag)

@@ -12,7 +12,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pytest
 
-from nav_eval import plots, report
+from nav_eval import report
+from nav_eval.reporting import plots, run_report
 
 ARENA = {'half_size': 1.0, 'robot_radius': 0.037, 'goal_radius': 0.1, 'goal_marker_radius': 0.05,
          'shapes': [{'name': 'obstacle_0', 'kind': 'box', 'half_x': 0.2, 'half_y': 0.05},
@@ -153,14 +154,14 @@ def full_report(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, str]:
     make_evaluation(run)
     experiments = run.parent / 'experiments.md'
     experiments.write_text(EXPERIMENTS)
-    path = report.write_report(run, experiments)
+    path = run_report.write_report(run, experiments)
     return path, path.read_text()
 
 
 def test_report_has_every_section_in_order(full_report: tuple[Path, str]) -> None:
     path, text = full_report
     assert path.name == 'Result.md'
-    positions = [text.index(f'## {title}\n') for title in report.SECTIONS]
+    positions = [text.index(f'## {title}\n') for title in run_report.SECTIONS]
     assert positions == sorted(positions)
     assert 'Missing' not in text
 
@@ -236,8 +237,8 @@ def test_missing_inputs_are_named_not_fatal(tmp_path: Path) -> None:
     run.mkdir()
     make_training(run)
     (run / 'config.yaml').unlink()
-    text = report.write_report(run).read_text()
-    for title in report.SECTIONS:
+    text = run_report.write_report(run).read_text()
+    for title in run_report.SECTIONS:
         assert f'## {title}\n' in text
     assert 'nav-gym-validate --json' in text
     assert text.count('**Missing:**') >= 6
@@ -302,7 +303,7 @@ def test_read_monitor_handles_resumed_files(tmp_path: Path) -> None:
     path = tmp_path / 'monitor.csv'
     path.write_text('#{"t_start": 1.0}\nr,l,t,is_success,event\n1.0,10,1.0,False,none\n'
                     '2.5,20,2.0,True,goal\nr,l,t,is_success,event\n-1.0,5,0.5,False,collision\n')
-    data = plots.read_monitor(path)
+    data = plots.monitor_arrays(path)
     np.testing.assert_array_equal(data['steps'], [10, 30, 35])
     np.testing.assert_array_equal(data['is_success'], [0, 1, 0])
     assert list(data['event']) == ['none', 'goal', 'collision']
@@ -329,6 +330,6 @@ def test_malformed_inputs_are_reported_not_fatal(tmp_path: Path) -> None:
     make_training(run, episodes=5)
     (run / 'validation.json').write_text('[{"name": ')
     write_json(run / 'eval' / 'results.json', {'arena': ARENA, 'sets': [{'name': 'dqn_heldout'}]})
-    text = report.write_report(run).read_text()
+    text = run_report.write_report(run).read_text()
     assert '**Unreadable input:** `validation.json` could not be read' in text
     assert '## 4. Evaluation' in text and '## 8. Reproduce' in text

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nav_eval import stats
+from nav_eval.analysis import stats
 
 REPS = 2_000  # enough for these checks, cheap on a loaded machine
 

@@ -13,14 +13,14 @@ import shutil
 import signal
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 import pytest
 import yaml
 
-from nav_eval.sweep_report import SECTIONS
-from nav_eval.sweep_trial import train_args
+from helpers import wait_until
+from nav_eval.sweeps.report import SECTIONS
+from nav_eval.sweeps.trial import train_args
 
 TINY = ['--total-timesteps', '200', '--set', 'learning_starts=100', '--set', 'checkpoint_freq=100',
         '--set', 'buffer_size=500', '--set', 'max_episode_steps=12', '--train-seeds', '101-102',
@@ -196,12 +196,16 @@ def test_ctrl_c_leaves_no_process_and_a_resumable_sweep(tmp_path):
                                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     folder = tmp_path / 'c'
     try:
-        deadline = time.monotonic() + 300
         started = [folder / 'trials' / f'seed{s}' / 'checkpoints' / 'dqn_0_steps.zip'
                    for s in (1, 2)]
-        while not all(p.is_file() for p in started):  # both trainers are training
-            assert process.poll() is None and time.monotonic() < deadline
-            time.sleep(0.5)
+
+        def training() -> bool:  # both trainers are training
+            if all(p.is_file() for p in started):
+                return True
+            assert process.poll() is None
+            return False
+
+        wait_until(training, 300, 'the first checkpoint of seeds 1 and 2', interval=0.5)
         below = descendants(process.pid)
         lines = [command_line(p) for p in below]
         assert sum('nav_sim.sim_node' in c or 'sim_node' in c for c in lines) >= 2, lines
@@ -215,14 +219,14 @@ def test_ctrl_c_leaves_no_process_and_a_resumable_sweep(tmp_path):
             process.wait()
     assert process.returncode == 130, output[-3000:]
     assert f'visnav-sweep --resume {folder}' in output
-    deadline = time.monotonic() + 90  # the trainers save a checkpoint, then exit
-    while any(running(p) for p in below) and time.monotonic() < deadline:
-        time.sleep(0.5)
-    left = [f'{p}: {command_line(p)}' for p in below if running(p)]
-    for pid in below:  # clean up before asserting, so a failure leaves nothing behind
-        if running(pid):
-            os.kill(pid, signal.SIGKILL)
-    assert not left
+    try:  # the trainers save a checkpoint, then exit
+        wait_until(lambda: not any(running(p) for p in below), 90,
+                   "the sweep's processes ending", interval=0.5,
+                   details=lambda: [f'{p}: {command_line(p)}' for p in below if running(p)])
+    finally:
+        for pid in below:  # clean up before failing, so a failure leaves nothing behind
+            if running(pid):
+                os.kill(pid, signal.SIGKILL)
     spec = json.loads((folder / 'sweep.json').read_text())
     for seed in (1, 2):
         trial = {'run_dir': str(folder / 'trials' / f'seed{seed}'), 'gpus': 0,
@@ -233,7 +237,7 @@ def test_ctrl_c_leaves_no_process_and_a_resumable_sweep(tmp_path):
 
 
 def test_eta_times_each_kind_of_trial_on_its_own():
-    from nav_eval.sweep_tune import eta_text
+    from nav_eval.sweeps.tune import eta_text
     durations = {'train': [600.0, 700.0], 'baseline': [60.0]}
     # 3 training trials of ~650 s and one baseline of ~60 s, not 4 x the mean of all three
     assert eta_text(durations, {'train': 3, 'baseline': 1}, 1) == '00:33:30'
@@ -248,7 +252,7 @@ def test_eta_times_each_kind_of_trial_on_its_own():
 def test_progress_counts_each_trial_once_across_a_resume(capsys):
     from types import SimpleNamespace
 
-    from nav_eval.sweep_tune import ProgressLines
+    from nav_eval.sweeps.tune import ProgressLines
     trials = [{'name': f'seed{i}', 'kind': 'train', 'log': 'x.log'} for i in (1, 2, 3)]
     trials.append({'name': 'baselines', 'kind': 'baseline', 'log': 'y.log'})
     fake = {t['name']: SimpleNamespace(config={'trial': t}, status='RUNNING') for t in trials}
@@ -266,7 +270,7 @@ def test_progress_counts_each_trial_once_across_a_resume(capsys):
 
 
 def test_configuration_and_trial_names_and_those_of_older_sweeps(tmp_path):
-    from nav_eval.sweep import NAMING, SweepSpec
+    from nav_eval.sweeps.spec import NAMING, SweepSpec
 
     def names(**kw):
         return [(t['name'], t['config']) for t in SweepSpec(str(tmp_path), [1], **kw).trials()
@@ -288,7 +292,7 @@ def test_configuration_and_trial_names_and_those_of_older_sweeps(tmp_path):
 def test_a_trial_child_evaluates_only_after_a_finished_training(monkeypatch, exit_code,
                                                                 returned, evaluated):
     import nav_gym.train
-    from nav_eval import sweep_trial
+    from nav_eval.sweeps import trial as sweep_trial
     calls = []
 
     def train_main(argv):

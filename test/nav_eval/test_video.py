@@ -14,7 +14,9 @@ import numpy as np
 import pytest
 from test_report import ARENA, make_evaluation, make_trace, make_training, write_json
 
-from nav_eval import report, report_format, video
+from nav_eval.reporting import format as report_format
+from nav_eval.reporting import run_report
+from nav_eval.reporting import videos as video
 
 STEPS = 12
 
@@ -112,7 +114,7 @@ def reported(tmp_path_factory: pytest.TempPathFactory) -> Path:
     run.mkdir()
     make_training(run)
     make_evaluation(run)
-    return report.write_report(run)
+    return run_report.write_report(run)
 
 
 def test_report_links_a_video_of_each_representative_episode(reported: Path) -> None:
@@ -154,13 +156,13 @@ def test_the_diagnosed_episode_gets_a_video_when_not_shown_otherwise(tmp_path: P
     # nav-eval-diagnose --set dqn_train --seed 101: an episode the report shows nowhere else
     write_json(run / 'eval' / 'diagnosis.json', {**diagnosis, 'set': 'dqn_train', 'seed': 101,
                                                  'outcome': 'success'})
-    captions = [c for c, _, _ in report.video_episodes(report.load_run(run))]
+    captions = [c for c, _, _ in run_report.video_episodes(run_report.load_run(run))]
     assert captions == ['Success: dqn_heldout seed 201 (success, 12 steps)',
                         'Failure: dqn_heldout seed 202 (collision, 12 steps)',
                         'Diagnosed: dqn_train seed 101 (success, 12 steps)']
     # before any diagnosis: the episode nav-eval-diagnose would pick
     (run / 'eval' / 'diagnosis.json').unlink()
-    captions = [c for c, _, _ in report.video_episodes(report.load_run(run))]
+    captions = [c for c, _, _ in run_report.video_episodes(run_report.load_run(run))]
     assert captions[1] == 'Failure (to diagnose): dqn_heldout seed 202 (collision, 12 steps)'
 
 

@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 from ament_index_python.packages import get_package_prefix
 
+from helpers import wait_until
 from nav_gym.errors import CheckpointError, TrainConfigError
 from nav_gym.train import checkpoints, load_model
 from nav_gym.train_config import TrainConfig, build, load_yaml
@@ -133,11 +134,14 @@ def test_ctrl_c_saves_a_checkpoint_and_reaps_the_sim(tmp_path):
          '--sim', 'embedded', '--namespace', namespace],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     run_dir = tmp_path / 'stop'
-    deadline = time.monotonic() + 120
-    # learning is under way once the first episode is in the Monitor CSV
-    while len(monitor_rows(run_dir / 'monitor.csv')) < 1:
-        assert process.poll() is None and time.monotonic() < deadline
-        time.sleep(0.2)
+
+    def learning() -> bool:  # under way once the first episode is in the Monitor CSV
+        if monitor_rows(run_dir / 'monitor.csv'):
+            return True
+        assert process.poll() is None, process.communicate()
+        return False
+
+    wait_until(learning, 120, 'an episode in the Monitor CSV', interval=0.2)
     process.send_signal(signal.SIGINT)
     out, err = process.communicate(timeout=120)
     assert process.returncode == 130, out + err

@@ -12,6 +12,7 @@ import pytest
 from std_srvs.srv import Trigger
 
 import nav_gym
+from helpers import wait_until
 from nav_gym.checks import check_checkers, drive_forward, drive_to_goal
 from nav_gym.config import EnvConfig
 from nav_gym.env import NavigationEnv, reward_terms
@@ -144,6 +145,7 @@ def test_attach_without_a_sim_times_out_with_advice(namespace):
     start = time.monotonic()
     with pytest.raises(SimUnavailableError, match='ros2 run nav_sim sim_node'):
         NavigationEnv(namespace=namespace, sim='attach', sim_timeout=2.0)
+    # about the 2 s sim_timeout; 8 s more is the margin for a loaded 2-core machine
     assert time.monotonic() - start < 10
 
 
@@ -167,6 +169,9 @@ def test_a_vanished_sim_is_a_clear_error_not_a_hang(namespace):
         with pytest.raises(SimUnavailableError, match='nav_sim'):
             for _ in range(100):
                 own.step(0)
+        # about the 3 s sim_timeout (a killed sim stays in the graph a while, so the first step
+        # waits that long); 2 s more is the margin for a loaded 2-core machine, while a second
+        # such wait would take 6 s
         assert time.monotonic() - start < 5
     finally:
         own.close()
@@ -207,29 +212,33 @@ def _refusal(**settings: object) -> str:
     sees a second one (when it connects, at a reset, or when frames of two worlds arrive).
     """
     env = None
-    deadline = time.monotonic() + 60.0
+
+    def an_episode() -> bool:
+        env.reset(seed=1)
+        env.step(1)
+        return False  # until SimConflictError
+
     try:
         env = NavigationEnv(**settings)
-        while time.monotonic() < deadline:
-            env.reset(seed=1)
-            env.step(1)
+        wait_until(an_episode, 60.0, f'an env with {settings} refusing two sims in one '
+                   'namespace', interval=0)
     except SimConflictError as exc:
         return str(exc)
     finally:
         if env is not None:
             env.close()
-    pytest.fail(f'an env with {settings} drove two sims in one namespace for 60 s')
 
 
 def _refused_by_the_sim(client: SimClient) -> str:
     """Call reset until the sim refuses it, having discovered the other sim and its name."""
-    deadline = time.monotonic() + 60.0
-    while time.monotonic() < deadline:
+    def refusal() -> str | None:
         response = client._call(client.cli_reset, Trigger.Request(), 'reset')
         if not response.success and '_UNKNOWN_' not in response.message:
             return response.message
         client.spin_until(lambda: False, 0.1)  # discovery takes its time
-    pytest.fail('the sims did not see each other within 60 s')
+        return None
+
+    return wait_until(refusal, 60.0, 'the sims seeing each other', interval=0)
 
 
 def test_two_sims_in_one_namespace_are_refused_naming_them(namespace):

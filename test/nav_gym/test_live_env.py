@@ -2,22 +2,14 @@
 
 from __future__ import annotations
 
-import socket
-import time
-
 import numpy as np
 import pytest
 
+from helpers import free_port, wait_until
 from nav_gym.config import EnvConfig
 from nav_gym.env import STEP_PHASES, NavigationEnv
 from nav_sim import live_topics
 from nav_sim.live_client import LiveClient
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(('127.0.0.1', 0))
-        return sock.getsockname()[1]
 
 
 def test_env_live_view_serves_observation_scene_and_steps():
@@ -30,10 +22,8 @@ def test_env_live_view_serves_observation_scene_and_steps():
             topics = [live_topics.OBSERVATION_TOPIC, live_topics.STEP_TOPIC,
                       live_topics.SCENE_TOPIC, live_topics.CAMERA_TOPIC]
             viewer.subscribe(topics)
-            deadline = time.monotonic() + 15.0
-            while not all(env.live.view.wanted(t) for t in topics):
-                assert time.monotonic() < deadline, 'the subscriptions did not take effect'
-                time.sleep(0.02)
+            wait_until(lambda: all(env.live.view.wanted(t) for t in topics), 15.0,
+                       'the subscriptions taking effect')
             obs, info = env.reset(seed=7)
             sent = [(None, obs, 0.0, info)]
             env.note_q_values([0.1, 0.7, 0.2])
@@ -46,13 +36,13 @@ def test_env_live_view_serves_observation_scene_and_steps():
             # the step topic goes at most 30 times a second: the first step of the run and
             # the episode's last (truncated at 3) always go, the second may be skipped
             def last_step_arrived() -> bool:
+                for message in viewer.receive(0.05):
+                    received.setdefault(message.topic, []).append(message.decode())
                 steps = received.get(live_topics.STEP_TOPIC, ())
                 return bool(steps) and steps[-1].step == len(sent) - 1
 
-            while not last_step_arrived():
-                assert time.monotonic() < deadline, f'received only {sorted(received)}'
-                for message in viewer.receive(0.05):
-                    received.setdefault(message.topic, []).append(message.decode())
+            wait_until(last_step_arrived, 15.0, 'the last step on the live view', interval=0,
+                       details=lambda: f'received only {sorted(received)}')
     finally:
         env.close()
     steps = received[live_topics.STEP_TOPIC]
@@ -89,14 +79,16 @@ def test_env_step_budget_adds_up_and_goes_to_diagnostics():
 
         env.client.node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
         env.reset(seed=3)
-        deadline = time.monotonic() + 30.0
-        while not reports:  # published about once a second while stepping
-            assert time.monotonic() < deadline, 'no env step report on /diagnostics'
+
+        def stepped_until_a_report() -> bool:  # published about once a second while stepping
             for _ in range(20):
                 _, _, terminated, truncated, _ = env.step(0)
                 if terminated or truncated:
                     env.reset(seed=4)
-            env.client.spin_until(lambda: bool(reports), 0.02)
+            return env.client.spin_until(lambda: bool(reports), 0.02)
+
+        wait_until(stepped_until_a_report, 30.0, 'an env step report on /diagnostics',
+                   interval=0)
         budget = env.time_budget()['env_step']
     finally:
         env.close()

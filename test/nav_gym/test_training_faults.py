@@ -12,14 +12,14 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import pytest
 
+from helpers import wait_until
 from nav_gym import train
-from nav_gym.checkpoints import checkpoints
 from nav_gym.errors import DiskFullError
+from nav_gym.run_dir import checkpoints
 
 TINY = ['--learning-starts', '100', '--buffer-size', '500', '--sim', 'embedded']
 
@@ -38,13 +38,16 @@ class Output:
 
     def wait_for(self, text: str, process: subprocess.Popen, timeout: float = 240,
                  errors: Output | None = None) -> None:
-        deadline = time.monotonic() + timeout
-        while not any(text in line for line in self.lines):
+        def printed() -> bool:
+            if any(text in line for line in self.lines):
+                return True
             if process.poll() is not None:
                 pytest.fail(f'exited {process.returncode}: {self.text}'
                             f'{errors.text if errors else ""}')
-            assert time.monotonic() < deadline, f'no {text!r} within {timeout} s: {self.text}'
-            time.sleep(0.05)
+            return False
+
+        wait_until(printed, timeout, f'{text!r} printed', interval=0.05,
+                   details=lambda: self.text)
 
     @property
     def text(self) -> str:
@@ -140,10 +143,15 @@ def test_a_killed_embedded_sim_saves_a_checkpoint_and_says_how_to_resume(tmp_pat
          '--buffer-size', '1000', '--sim', 'embedded', '--runs-dir', str(tmp_path),
          '--run-name', 'killed'])
     monitor = run_dir / 'monitor.csv'
-    deadline = time.monotonic() + 240
-    while not (monitor.is_file() and len(monitor.read_text().splitlines()) > 2):
-        assert process.poll() is None and time.monotonic() < deadline, out.text + err.text
-        time.sleep(0.1)
+
+    def learning() -> bool:  # two episodes in the Monitor CSV
+        if monitor.is_file() and len(monitor.read_text().splitlines()) > 2:
+            return True
+        assert process.poll() is None, out.text + err.text
+        return False
+
+    wait_until(learning, 240, 'two episodes in the Monitor CSV', interval=0.1,
+               details=lambda: out.text + err.text)
     sims = [pid for pid in trainer_children(process.pid)
             if b'sim_node' in Path(f'/proc/{pid}/cmdline').read_bytes()]
     assert len(sims) == 1

@@ -5,12 +5,12 @@ from __future__ import annotations
 import json
 import math
 import socket
-import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from helpers import free_port, wait_until
 from nav_sim import live_topics
 from nav_sim.client import SimClient
 from nav_sim.config import SimConfig
@@ -21,12 +21,6 @@ from nav_sim.world import World
 
 LAYOUT = Path(__file__).resolve().parents[2] / 'config' / 'foxglove' / 'visnav.json'
 QUIET = {'publish_clock': False}
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(('127.0.0.1', 0))
-        return sock.getsockname()[1]
 
 
 def test_shipped_layout_is_the_generated_one_and_names_known_topics():
@@ -104,16 +98,24 @@ def test_headless_client_watches_a_live_sim_node(namespace):
             def ours(topic: str) -> list:  # messages of the periods this client drove
                 return [m for m in received.get(topic, ()) if m.log_time_ns in frames]
 
-            deadline = time.monotonic() + 30.0
-            # subscriptions take effect asynchronously, and images and the robot go at most
-            # 15 times a second: step until every topic came for the episode we drive
-            while (len(ours(live_topics.CAMERA_TOPIC)) < 3 or not ours(live_topics.SCENE_TOPIC)
-                   or not ours(live_topics.ROBOT_TOPIC) or not ours(live_topics.EVENT_TOPIC)):
-                assert time.monotonic() < deadline, f'only {sorted(received)} arrived'
+            def every_topic_came() -> bool:
+                return (len(ours(live_topics.CAMERA_TOPIC)) >= 3
+                        and all(ours(topic) for topic in (live_topics.SCENE_TOPIC,
+                                                          live_topics.ROBOT_TOPIC,
+                                                          live_topics.EVENT_TOPIC)))
+
+            def step_and_receive() -> bool:
+                nonlocal frame
                 frame = client.step(0.0, 0.5, frame)
                 frames[frame.stamp_ns] = frame
                 for message in viewer.receive(0.02):
                     received.setdefault(message.topic, []).append(message)
+                return every_topic_came()
+
+            # subscriptions take effect asynchronously, and images and the robot go at most
+            # 15 times a second: step until every topic came for the episode we drive
+            wait_until(step_and_receive, 30.0, 'every subscribed topic for our periods',
+                       interval=0, details=lambda: f'only {sorted(received)} arrived')
     for message in ours(live_topics.CAMERA_TOPIC):
         msg = message.decode()
         assert (msg.width, msg.height, msg.encoding) == (128, 96, 'rgb8')

@@ -5,17 +5,19 @@ from __future__ import annotations
 import math
 import signal
 import subprocess
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 from ament_index_python.packages import get_package_prefix
+from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry
+from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo
 
+from helpers import interrupt, wait_until
 from nav_sim import qos
 from nav_sim.client import SimClient
 from nav_sim.config import SimConfig
@@ -24,22 +26,15 @@ from nav_sim.sim_process import ros_args
 
 CFG = SimConfig()
 PERIOD_NS = CFG.action_repeat * round(CFG.sim_dt * 1e9)
+#: qos.OBSERVATION with room for every message between two looks
+EVERY = QoSProfile(depth=100, reliability=qos.OBSERVATION.reliability,
+                   durability=qos.OBSERVATION.durability)
 
 
 def start_node(namespace: str, **params: object) -> subprocess.Popen:
     executable = Path(get_package_prefix('nav_sim')) / 'lib' / 'nav_sim' / 'sim_node'
     return subprocess.Popen([str(executable), *ros_args(namespace, params)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
-def interrupt(process: subprocess.Popen) -> tuple[int, str]:
-    process.send_signal(signal.SIGINT)
-    try:
-        out, err = process.communicate(timeout=15)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        out, err = process.communicate()
-    return process.returncode, out + err
 
 
 @pytest.fixture
@@ -69,12 +64,15 @@ def test_publishes_every_topic_with_one_stamp_per_period(node):
     goal = collect(client, PoseStamped, 'goal_pose', qos.LATCHED)
     assert client.spin_until(lambda: goal, 10.0), 'latched goal_pose not delivered'
     # wait until the sim has discovered the new subscriptions, then drive one period
-    deadline = time.monotonic() + 10
     frame, scenario = client.reset(seed=101, split='train')
-    while time.monotonic() < deadline:
+
+    def step_reaches_every_subscription() -> bool:
+        nonlocal frame
         frame = client.step(0.0, 0.0, frame)
-        if client.spin_until(lambda: odom and info and clock, 0.2):
-            break
+        return client.spin_until(lambda: odom and info and clock, 0.2)
+
+    wait_until(step_reaches_every_subscription, 10.0, 'odom, camera_info and /clock',
+               interval=0)
     frame = client.step(0.12, 0.0, frame)
     assert client.spin_until(lambda: odom[-1].header.stamp == frame.image.header.stamp
                              and info[-1].header.stamp == frame.image.header.stamp
@@ -89,9 +87,23 @@ def test_publishes_every_topic_with_one_stamp_per_period(node):
         scenario['goal'], abs=1e-4)
 
 
+def stamp_ns(msg: object) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
 def test_lockstep_one_command_one_observation(node):
     _, client = node
-    frame, scenario = client.reset(seed=102, split='train')
+    events = collect(client, DiagnosticArray, 'episode_event', EVERY)  # all, in order
+    frame = scenario = None
+
+    def reset_reaches_events() -> bool:  # the sim matches a new subscription a moment later
+        nonlocal frame, scenario
+        frame, scenario = client.reset(seed=102, split='train')
+        return client.spin_until(lambda: any(stamp_ns(e) == frame.stamp_ns for e in events),
+                                 0.2)
+
+    wait_until(reset_reaches_events, 10.0, 'a reset on a new episode_event subscription',
+               interval=0)
     assert frame.event['event'] == 'reset' and frame.event['episode_step'] == 0
     assert frame.stamp_ns == scenario['stamp_ns']
     stamps = [frame.stamp_ns]
@@ -106,6 +118,14 @@ def test_lockstep_one_command_one_observation(node):
     before = client._latest
     client.spin_until(lambda: client._latest is not before, 0.5)
     assert client._latest is before
+    # not even late: one topic keeps its order, so had the sim published anything in that
+    # half second, it would come between the last step's event and the next command's
+    last = frame
+    frame = client.step(0.0, 1.0, frame)
+    assert client.spin_until(lambda: stamp_ns(events[-1]) == frame.stamp_ns, 5.0)
+    assert [stamp_ns(e) for e in events if stamp_ns(e) >= last.stamp_ns] == [
+        last.stamp_ns, frame.stamp_ns]
+    assert frame.stamp_ns - last.stamp_ns == PERIOD_NS
 
 
 def test_reset_reports_the_scenario_and_is_reproducible(node):
@@ -184,10 +204,14 @@ def test_realtime_mode_runs_without_commands_and_follows_cmd_vel(namespace):
             assert client._latest.pose == pytest.approx(frame.pose, abs=1e-9)  # no cmd: still
             twist = Twist()
             twist.angular.z = 1.0
-            deadline = time.monotonic() + 5.0
-            while time.monotonic() < deadline and client._latest.twist[1] != 1.0:
+
+            def turning() -> bool:
                 client.pub_cmd.publish(twist)
-                client.spin_until(lambda: False, 0.05)
+                return client.spin_until(
+                    lambda: client._latest.twist[1] == pytest.approx(1.0), 0.05)
+
+            wait_until(turning, 5.0, 'the realtime sim turning at the commanded rate',
+                       interval=0)
             assert client._latest.twist[1] == pytest.approx(1.0)
     finally:
         code, output = interrupt(process)

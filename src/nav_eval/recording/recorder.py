@@ -27,7 +27,8 @@ milliseconds later, and what it publishes before then never reaches the bag.  Be
 must be complete, reset and step until :meth:`BagRecorder.wait_for` sees a whole control period
 (``topics=PERIOD_TOPICS``).
 
-Reading a bag back (episodes, events, messages) is :mod:`nav_eval.bags`, which needs no rclpy.
+Reading a bag back (episodes, events, messages) is :mod:`nav_eval.recording.bags`, which needs
+no rclpy.
 """
 
 from __future__ import annotations
@@ -65,7 +66,8 @@ from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, W
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import CameraInfo, Image
 
-from nav_eval.bags import (
+from nav_eval.errors import RecordingError
+from nav_eval.recording.bags import (
     BAG_VERSION,
     EPISODE_TOPIC,
     IMAGE_TOPIC,
@@ -74,7 +76,6 @@ from nav_eval.bags import (
     TYPESTORE,
     cdr_stamp_ns,
 )
-from nav_eval.errors import RecordingError
 from nav_sim import interface, qos
 
 _log = logging.getLogger(__name__)
@@ -310,6 +311,11 @@ class BagRecorder:
 
     # --- public API -----------------------------------------------------------------------
     @property
+    def received(self) -> int:
+        """Return how many messages the recorder has taken off the network (written or not)."""
+        return self._received
+
+    @property
     def counts(self) -> dict[str, int]:
         """Messages written so far per resolved topic name (annotations included)."""
         with self._cond:
@@ -379,11 +385,12 @@ class BagRecorder:
     def write(self, topic: str, msgtype: str, data: bytes, stamp_ns: int) -> None:
         """Write a message that does not come from the graph.
 
-        The message is CDR ``data`` of ``msgtype`` (a type of :data:`nav_eval.bags.TYPESTORE`),
-        written on ``topic`` at the sim stamp ``stamp_ns``.
+        The message is CDR ``data`` of ``msgtype`` (a type of
+        :data:`nav_eval.recording.bags.TYPESTORE`), written on ``topic`` at the sim stamp
+        ``stamp_ns``.
 
         The evaluation writes the live view's scene topics this way
-        (:mod:`nav_eval.bag_scene`).
+        (:mod:`nav_eval.recording.scene`).
         """
         with self._cond:
             if self._writer is None:

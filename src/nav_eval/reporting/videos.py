@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from nav_eval import plots
+from nav_eval.reporting import plots
 from nav_gym.run_dir import frames_path
 
 FPS = 4  # one control period is 0.512 s: 4 frames/s is about twice real time

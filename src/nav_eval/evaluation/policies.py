@@ -12,8 +12,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from nav_eval.analysis.failure_layers import centre_band, goal_bearing, servo_action
 from nav_eval.errors import EvaluationError
-from nav_eval.layers import centre_band, goal_bearing, servo_action
 
 
 class Policy(Protocol):

@@ -14,28 +14,18 @@ from typing import Any
 
 import numpy as np
 
+from nav_gym.observers import EpisodeObserver
 from nav_sim import live_topics
 from nav_sim.live_topics import OBSERVATION_TOPIC, ROBOT_TOPIC, SCENE_TOPIC, STEP_TOPIC
 
-#: what this writer adds to a bag, with the recorder's graph topics making up the layout's
-BAG_SCENE_TOPICS = (SCENE_TOPIC, ROBOT_TOPIC, OBSERVATION_TOPIC, STEP_TOPIC)
 
-
-class BagSceneWriter:
+class BagSceneWriter(EpisodeObserver):
     """Write the scene, robot, observation and step of every env frame with ``recorder.write``."""
 
     def __init__(self, recorder: Any, sim_params: dict[str, Any] | None = None) -> None:
-        """Write into ``recorder`` (a :class:`nav_eval.bag_recorder.BagRecorder`)."""
-        from nav_sim.live import EpisodeScene
+        """Write into ``recorder`` (a :class:`nav_eval.recording.recorder.BagRecorder`)."""
+        super().__init__(sim_params)
         self.recorder = recorder
-        self.scene = EpisodeScene(live_topics.arena_for(sim_params))
-        self.episode = 0
-        self.episode_return = 0.0
-        self.q_values: Any = None
-
-    def note_q_values(self, q_values: Any) -> None:
-        """Attach the policy's Q-values to the next step."""
-        self.q_values = q_values
 
     def _write(self, topic: str, msg: Any, stamp_ns: int) -> None:
         msgtype = live_topics.TOPIC_TYPES[topic]
@@ -44,9 +34,7 @@ class BagSceneWriter:
     def on_reset(self, stamp_ns: int, rgb: np.ndarray, obs: np.ndarray,
                  info: dict[str, Any]) -> None:
         """Write the episode's scene, the robot at its start and the first observation."""
-        self.episode += 1
-        self.episode_return = 0.0
-        self.scene.reset(info['scenario'], info['pose'])
+        self.begin_episode(info)
         self._write(SCENE_TOPIC, self.scene.scene(stamp_ns), stamp_ns)
         self._write(ROBOT_TOPIC, self.scene.robot(stamp_ns), stamp_ns)
         self._write(OBSERVATION_TOPIC, live_topics.observation_image(obs, stamp_ns), stamp_ns)
@@ -54,13 +42,8 @@ class BagSceneWriter:
     def on_step(self, stamp_ns: int, rgb: np.ndarray, obs: np.ndarray, action: int,
                 reward: float, info: dict[str, Any], done: bool) -> None:
         """Write the robot, the observation and the step's numbers."""
-        self.episode_return += reward
-        self.scene.step(info['pose'])
-        q_values, self.q_values = self.q_values, None
+        q_values = self.follow_step(reward, info)
         self._write(ROBOT_TOPIC, self.scene.robot(stamp_ns), stamp_ns)
         self._write(OBSERVATION_TOPIC, live_topics.observation_image(obs, stamp_ns), stamp_ns)
-        self._write(STEP_TOPIC, live_topics.env_step(
-            stamp_ns, self.episode, info['step'], action, info['action_name'], reward,
-            info['reward_terms'], self.episode_return, info['distance'], info['event'],
-            q_values), stamp_ns)
-
+        self._write(STEP_TOPIC, self.step_message(stamp_ns, action, reward, info, q_values),
+                    stamp_ns)

@@ -7,8 +7,9 @@ share of decisions taken with the goal in view, how many of them drive forward, 
 the policy reverses between left and right).  A time-out whose goal came into view late is a
 search failure; one that saw the goal most of the time and reversed all along is an approach
 failure.  The goal is "in view" in an observation when the diagnosis's goal-marker mask
-(:func:`nav_eval.layers.goal_mask`) has at least ``MIN_PIXELS`` pixels: more than the diagnosis
-needs to place a bearing, so that a sliver at the image edge does not count as found.
+(:func:`nav_eval.analysis.failure_layers.goal_mask`) has at least ``MIN_PIXELS`` pixels: more
+than the diagnosis needs to place a bearing, so that a sliver at the image edge does not count
+as found.
 
 Reads the traces ``nav-eval-evaluate`` writes: ``RUN/eval/traces/<set>/seed_<n>.json`` (the
 actions) and ``seed_<n>_frames.npz`` (the observation before each decision, then the last).
@@ -24,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from nav_eval.layers import goal_mask
-from nav_eval.metrics import OUTCOMES
-from nav_gym import run_dir as layout
+from nav_eval.analysis.failure_layers import goal_mask
+from nav_eval.analysis.metrics import OUTCOMES
 from nav_gym.actions import ACTION_NAMES
+from nav_gym.run_dir import frames_path
 
 MIN_PIXELS = 10  # fewer green pixels than this is noise at the image edge, not the goal
 LEFT, FORWARD, RIGHT = ACTION_NAMES.index('left'), ACTION_NAMES.index('forward'), \
@@ -82,7 +83,7 @@ def traces_anatomy(traces: Iterable[tuple[Path, dict[str, Any]]]) -> list[Episod
     out = []
     for path, trace in traces:
         try:
-            with np.load(layout.frames_path(path)) as data:
+            with np.load(frames_path(path)) as data:
                 frames = data['obs']
             out.append(episode_anatomy(trace, frames))
         except (OSError, ValueError, KeyError):

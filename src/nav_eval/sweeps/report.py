@@ -3,8 +3,8 @@
 Reads only files (no ROS, no Ray): each trial is a run directory as ``nav-gym-train`` writes it
 with its ``eval/results.json`` (final model on the training and held-out seeds) and
 ``eval/curve/<steps>/results.json`` (held-out success per checkpoint) and, where they were
-kept, the episodes' traces (the failure anatomy, :mod:`nav_eval.anatomy`, and the value
-calibration, :mod:`nav_eval.calibration`); baselines are
+kept, the episodes' traces (the failure anatomy, :mod:`nav_eval.analysis.anatomy`, and the value
+calibration, :mod:`nav_eval.analysis.calibration`); baselines are
 ``baselines/<config>.json``.  Trials with the same training settings (all but the seed and
 bookkeeping such as the run name) form one configuration.  The same trials aggregated twice give
 identical files (fixed bootstrap seed, PNGs without a software/date stamp).
@@ -18,10 +18,32 @@ from typing import Any
 
 import numpy as np
 
-from nav_eval import anatomy, calibration, stats
-from nav_eval.report_format import num, pct, table, to_html
-from nav_eval.sweep_figures import write_figures
-from nav_gym import run_dir as layout
+from nav_eval.analysis import anatomy, calibration, stats
+from nav_eval.errors import SweepError
+from nav_eval.reporting.format import num, pct, table, to_html
+from nav_eval.seeds import HELDOUT_BANK, TRAIN_BANK, seed_text
+from nav_eval.sweeps.figures import write_figures
+from nav_eval.sweeps.spec import (
+    BASELINES,
+    FAILED_FILE,
+    SWEEP_FIGURES,
+    SWEEP_FILE,
+    SWEEP_HTML,
+    SWEEP_REPORT,
+    SWEEP_RESULTS,
+    TRIALS,
+    SweepSpec,
+)
+from nav_gym.run_dir import (
+    CONFIG,
+    CURVE,
+    EVAL,
+    FINAL_MODEL,
+    RESULTS,
+    SUMMARY,
+    load_config,
+    read_traces,
+)
 from nav_gym.train_config import TrainConfig
 
 FINAL_SETS = {'train': 'dqn_train', 'heldout': 'dqn_heldout'}
@@ -48,35 +70,35 @@ def _read_json(path: Path) -> Any:
 
 def trial_dirs(folder: Path) -> list[Path]:
     """Return the run directories of a sweep (``trials/*``) or of a folder of runs."""
-    root = folder / 'trials' if (folder / 'trials').is_dir() else folder
-    return sorted(p for p in root.iterdir() if (p / layout.CONFIG).is_file()) \
+    root = folder / TRIALS if (folder / TRIALS).is_dir() else folder
+    return sorted(p for p in root.iterdir() if (p / CONFIG).is_file()) \
         if root.is_dir() else []
 
 
 def read_trial(run_dir: Path) -> dict[str, Any]:
     """Collect one trial's seed, settings, final evaluation and curve points."""
-    config = layout.load_config(run_dir)
-    results = _read_json(run_dir / layout.EVAL / layout.RESULTS) or {}
+    config = load_config(run_dir)
+    results = _read_json(run_dir / EVAL / RESULTS) or {}
     sets = {s['name']: s for s in results.get('sets', [])}
     final = {split: sets[name] for split, name in FINAL_SETS.items() if name in sets}
     curve, curve_values = {}, {}
-    for path in sorted((run_dir / layout.EVAL / 'curve').glob('*/results.json')):
+    for path in sorted((run_dir / EVAL / CURVE).glob(f'*/{RESULTS}')):
         data = _read_json(path) or {}
         for s in data.get('sets', []):
             curve[int(path.parent.name)] = {'success_rate': s['summary']['success_rate'],
                                             'seeds': s['seeds']}
             curve_values[int(path.parent.name)] = calibration.set_values(
                 path.parent, s['name'], config, s['seeds'])
-    summary = _read_json(run_dir / layout.SUMMARY) or {}
+    summary = _read_json(run_dir / SUMMARY) or {}
     heldout = final.get('heldout')
-    traces = (list(layout.read_traces(run_dir / layout.EVAL, FINAL_SETS['heldout'],
-                                      heldout['seeds'])) if heldout else [])
+    traces = (list(read_traces(run_dir / EVAL, FINAL_SETS['heldout'], heldout['seeds']))
+              if heldout else [])
     key = {k: v for k, v in vars(config).items() if k not in BOOKKEEPING}
     return {'name': run_dir.name, 'run_dir': run_dir, 'seed': config.seed, 'settings': key,
             'final': final, 'curve': curve, 'anatomy': anatomy.traces_anatomy(traces),
             'values': calibration.traces_values(traces, config),
             'curve_values': curve_values,
-            'finished': (run_dir / layout.FINAL_MODEL).is_file(),
+            'finished': (run_dir / FINAL_MODEL).is_file(),
             'wall_clock_s': summary.get('wall_clock_total_s'),
             'steps': summary.get('num_timesteps')}
 
@@ -209,7 +231,7 @@ def bank_rows(folder: Path, groups: dict[str, list[dict]]) -> list[dict[str, Any
     """Return success on both banks with CIs over scenarios: baselines and the DQN trials."""
     rows = []
     for config in groups:
-        baseline = _read_json(folder / 'baselines' / f'{config}.json') or {}
+        baseline = _read_json(folder / BASELINES / f'{config}.json') or {}
         by_policy: dict[str, dict[str, list]] = {}
         for s in baseline.get('sets', []):
             by_policy.setdefault(s['policy'], {})[s['split']] = s['episodes']
@@ -274,7 +296,7 @@ def _markdown(folder: Path, data: dict[str, Any], figures: dict[str, str]) -> st
     lines += _calibration_markdown(data['calibration'])
     lines += ['## Bank difficulty', '',
               'Success on the training bank and the held-out bank, each with its CI over '
-              'scenarios: the random policy, the image-only servo (`nav_eval.policies.'
+              'scenarios: the random policy, the image-only servo (`nav_eval.evaluation.policies.'
               'ServoPolicy`) and the trained models.', '']
     rows = [[r['config'], r['policy'], f"{r['episodes']['train']} + {r['episodes']['heldout']}",
              _ci(r['train']), _ci(r['heldout'])] for r in data['banks']]
@@ -300,7 +322,7 @@ def _anatomy_markdown(rows: list[dict[str, Any]]) -> list[str]:
               '*reaching* it (the share of decisions taken with the goal in view, how many of '
               'those drove forward, left/right reversals per 100 decisions). A time-out that '
               'saw the goal late failed to search; one that saw it most of the time and '
-              'reversed failed to approach (`nav_eval.anatomy`).', '']
+              'reversed failed to approach (`nav_eval.analysis.anatomy`).', '']
 
     def number(value: Any, digits: int = 0) -> str:
         return '–' if value is None else f'{value:.{digits}f}'
@@ -327,7 +349,8 @@ def _calibration_markdown(rows: list[dict[str, Any]]) -> list[str]:
               'and takes every decision, time-outs included: the share whose Q is above the '
               'most any episode can return from there (the goal bonus plus the progress reward '
               'of the whole distance to the goal). Rows with a step count are the checkpoints '
-              'of the sample-efficiency curve, seeds pooled (`nav_eval.calibration`).', '']
+              'of the sample-efficiency curve, seeds pooled '
+              '(`nav_eval.analysis.calibration`).', '']
 
     def signed(value: Any) -> str:
         return '–' if value is None else f'{value:+.2f}'
@@ -360,12 +383,11 @@ def _jsonable(value: Any) -> Any:
 
 def write_sweep_report(folder: Path) -> Path:
     """Aggregate the trials under ``folder``; write the report files; return Sweep.md."""
-    from nav_eval.errors import NavEvalError
     runs = trial_dirs(folder)
     if not runs:
-        raise NavEvalError(f'{folder} holds no run directories (trials/*/config.yaml): run a '
-                           'sweep with `visnav-sweep` or pass a folder of training runs')
-    spec = _read_json(folder / 'sweep.json') or {}
+        raise SweepError(f'{folder} holds no run directories (trials/*/config.yaml): run a '
+                         'sweep with `visnav-sweep` or pass a folder of training runs')
+    spec = _read_json(folder / SWEEP_FILE) or {}
     names = _trial_configs(folder, spec)
     trials = [read_trial(r) for r in runs]
     groups = group_trials(trials, names)
@@ -377,7 +399,7 @@ def write_sweep_report(folder: Path) -> Path:
         'trials': [t['name'] for t in trials], 'per_seed': per_seed_rows(groups),
         'aggregates': configuration_stats(groups), 'banks': banks,
         'bank_verdict': stats.bank_verdict([r for r in banks]), 'missing': missing,
-        'failed': _read_json(folder / 'failed.json') or {},
+        'failed': _read_json(folder / FAILED_FILE) or {},
         'settings': {c: m[0]['settings'] for c, m in groups.items()},
         'anatomy': anatomy_rows(groups), 'calibration': calibration_rows(groups)}
     curves = curve_scores(groups)
@@ -386,22 +408,21 @@ def write_sweep_report(folder: Path) -> Path:
                for c, m in groups.items() if any('heldout' in t['final'] for t in m)}
     if len(success) > 1:
         data['improvement'] = stats.probability_of_improvement(success)
-    figures = write_figures(folder / 'figures', data, success, curves)
+    figures = write_figures(folder / SWEEP_FIGURES, data, success, curves)
     data['sample_efficiency'] = {c: {'steps': v['steps'], 'seeds': v['seeds'],
                                      'iqm': v['iqm'], 'low': v['low'], 'high': v['high']}
                                  for c, v in curves.items() if 'iqm' in v}
-    text = _markdown(folder, data, {k: f'figures/{v}' for k, v in figures.items()})
-    (folder / 'Sweep.md').write_text(text + '\n')
-    (folder / 'Sweep.html').write_text(to_html(text, folder, f'sweep {folder.name}'))
-    (folder / 'results.json').write_text(json.dumps(_jsonable(data), indent=1,
-                                                    sort_keys=True) + '\n')
-    return folder / 'Sweep.md'
+    text = _markdown(folder, data, {k: f'{SWEEP_FIGURES}/{v}' for k, v in figures.items()})
+    (folder / SWEEP_REPORT).write_text(text + '\n')
+    (folder / SWEEP_HTML).write_text(to_html(text, folder, f'sweep {folder.name}'))
+    (folder / SWEEP_RESULTS).write_text(json.dumps(_jsonable(data), indent=1,
+                                                   sort_keys=True) + '\n')
+    return folder / SWEEP_REPORT
 
 
 def _missing_eval(run_dir: Path, spec: dict[str, Any]) -> str:
-    from nav_eval.sweep_trial import seed_text
-    train = seed_text(spec.get('train_seeds', list(range(101, 201))))
-    heldout = seed_text(spec.get('heldout_seeds', list(range(201, 301))))
+    train = seed_text(spec.get('train_seeds', TRAIN_BANK))
+    heldout = seed_text(spec.get('heldout_seeds', HELDOUT_BANK))
     return (f'nav-eval-evaluate {run_dir} --sets dqn_train,dqn_heldout --train-seeds {train} '
             f'--heldout-seeds {heldout} --no-record')
 
@@ -410,7 +431,6 @@ def _trial_configs(folder: Path, spec: dict[str, Any]) -> dict[str, str]:
     """Map trial names to configuration names from ``sweep.json`` (empty without one)."""
     if not spec:
         return {}
-    from nav_eval.sweep import SweepSpec
     try:
         trials = SweepSpec(**{**spec, 'sweep_dir': str(folder)}).trials()
     except TypeError:

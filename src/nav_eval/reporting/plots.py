@@ -24,25 +24,24 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.patches import Circle, Polygon, Rectangle  # noqa: E402
 
-from nav_gym import run_dir as layout  # noqa: E402
 from nav_gym.actions import action_label  # noqa: E402
-from nav_gym.checkpoints import checkpoints  # noqa: E402
+from nav_gym.run_dir import MONITOR, checkpoints, read_monitor, truthy  # noqa: E402
 
 DPI = 100
 OUTCOME_COLOURS = {'success': 'tab:green', 'collision': 'tab:red', 'timeout': 'tab:orange'}
 
 
-def read_monitor(path: Path) -> dict[str, np.ndarray]:
+def monitor_arrays(path: Path) -> dict[str, np.ndarray]:
     """Read the episodes of an SB3 Monitor CSV as arrays.
 
     ``r``, ``l``, ``t``, ``steps`` (cumulative ``l``) and, when logged, ``is_success`` (0/1)
-    and ``event``; parsed by :func:`nav_gym.run_dir.read_monitor`.
+    and ``event``; parsed by :func:`nav_gym.run_dir.read_monitor` (its columns of strings).
     """
-    columns = layout.read_monitor(path)
+    columns = read_monitor(path)
     data = {key: np.array([float(v) for v in columns.get(key, [])]) for key in ('r', 'l', 't')}
     data['steps'] = np.cumsum(data['l'])
     if 'is_success' in columns:
-        data['is_success'] = np.array([float(layout.truthy(v)) for v in columns['is_success']])
+        data['is_success'] = np.array([float(truthy(v)) for v in columns['is_success']])
     if 'event' in columns:
         data['event'] = np.array(columns['event'], dtype=str)
     return data
@@ -69,7 +68,7 @@ def smoothing_window(episodes: int) -> int:
 
 def training_curves(run_dir: Path, out: Path) -> Path:
     """Episode return, length and (if logged) success/collision rate vs environment steps."""
-    data = read_monitor(run_dir / layout.MONITOR)
+    data = monitor_arrays(run_dir / MONITOR)
     rates = 'is_success' in data
     fig, axes = plt.subplots(3 if rates else 2, 1, figsize=(9, 8.4 if rates else 6),
                              sharex=True, dpi=DPI)

@@ -15,7 +15,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from rliable import plot_utils  # noqa: E402
 
-from nav_eval import stats  # noqa: E402
+from nav_eval.analysis import stats  # noqa: E402
+from nav_eval.seeds import seed_range  # noqa: E402
 
 PROFILE_TAUS = np.linspace(0.0, 1.0, 21)
 
@@ -70,16 +71,10 @@ def _curve(folder: Path, curves: dict[str, Any]) -> str | None:
         algorithms=list(same), ax=ax, xlabel='training steps (thousands)',
         ylabel='IQM held-out success', labelsize='medium', ticklabelsize='medium')
     ax.set_ylim(-0.03, 1.03)
-    ax.set_title(f'held-out scenarios {_seed_text(seeds)} ({len(seeds)} per checkpoint)',
+    ax.set_title(f'held-out scenarios {seed_range(seeds)} ({len(seeds)} per checkpoint)',
                  fontsize='medium')
     ax.legend(loc='lower right', fontsize='small')
     return _save(fig, folder, 'sample_efficiency.png')
-
-
-def _seed_text(seeds: list[int]) -> str:
-    contiguous = seeds == list(range(seeds[0], seeds[0] + len(seeds)))
-    return f'{seeds[0]}–{seeds[-1]}' if contiguous and len(seeds) > 1 else ','.join(
-        map(str, seeds))
 
 
 def _improvement(folder: Path, improvement: dict[str, Any]) -> str:

@@ -5,8 +5,7 @@ from __future__ import annotations
 import pytest
 import torch as th
 
-from nav_gym.double_dqn import DoubleDQN, double_q_target
-from nav_gym.live_hooks import timed_dqn
+from nav_gym.learner import DoubleDQN, double_q_target, learner_class
 from nav_gym.train_config import TrainConfig
 
 
@@ -23,6 +22,6 @@ def test_the_online_network_picks_and_the_target_network_values():
 def test_it_is_off_by_default_and_chosen_by_the_config():
     assert TrainConfig().double_q is False
     assert 'double_q' not in TrainConfig().dqn_kwargs()  # not an SB3 argument
-    assert issubclass(timed_dqn(None, double_q=True), DoubleDQN)
-    assert not issubclass(timed_dqn(None), DoubleDQN)
-    assert issubclass(timed_dqn(object(), double_q=True), DoubleDQN)  # timed, too
+    assert issubclass(learner_class(None, double_q=True), DoubleDQN)
+    assert not issubclass(learner_class(None), DoubleDQN)
+    assert issubclass(learner_class(object(), double_q=True), DoubleDQN)  # timed, too

@@ -1,4 +1,4 @@
-"""Read the bags that :mod:`nav_eval.bag_recorder` writes (``rosbags`` only, no rclpy).
+"""Read the bags that :mod:`nav_eval.recording.recorder` writes (``rosbags`` only, no rclpy).
 
 The bag layout: rosbag2 version 9 (what Jazzy writes), MCAP storage, sim-time timestamps, one
 topic per fully resolved name.

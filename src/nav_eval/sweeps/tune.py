@@ -20,9 +20,9 @@ from typing import Any
 
 from ray import tune
 
-from nav_eval.sweep_trial import log_tail, run_trial
+from nav_eval.sweeps.spec import TUNE
+from nav_eval.sweeps.trial import log_tail, run_trial
 
-TUNE_DIR = 'tune'
 MAX_FAILURES = 1
 
 
@@ -186,7 +186,7 @@ def _tuner(spec: Any, trials: list[dict[str, Any]], resume: bool, retry_failed: 
     resources = {'cpu': spec.cpus_per_trial, 'gpu': spec.gpus_per_trial}
     fn = tune.with_resources(trainable, resources)
     progress = ProgressLines(trials, done)
-    path = str(Path(spec.sweep_dir) / TUNE_DIR)
+    path = str(Path(spec.sweep_dir) / TUNE)
     if resume and tune.Tuner.can_restore(path):
         tuner = tune.Tuner.restore(path, fn, resume_unfinished=True, resume_errored=False,
                                    restart_errored=retry_failed)
@@ -197,7 +197,7 @@ def _tuner(spec: Any, trials: list[dict[str, Any]], resume: bool, retry_failed: 
             local._run_config.callbacks = [progress]
         return tuner, progress
     run_config = tune.RunConfig(
-        name=TUNE_DIR, storage_path=spec.sweep_dir, verbose=0, callbacks=[progress],
+        name=TUNE, storage_path=spec.sweep_dir, verbose=0, callbacks=[progress],
         failure_config=tune.FailureConfig(max_failures=MAX_FAILURES),
         checkpoint_config=tune.CheckpointConfig(num_to_keep=1))
     tuner = tune.Tuner(fn, param_space={'trial': tune.grid_search(trials)},

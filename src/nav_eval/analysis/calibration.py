@@ -5,8 +5,8 @@ A deterministic policy in a deterministic sim gets, from every decision of an ep
 the run's ``gamma``.  A Q-learning network's value of the action it took estimates that return; how
 far above it the value sits is the learner's *overestimation*.  DQN's target takes the maximum over
 noisy estimates, so where the actions' true values are close (a turn now or a step forward, the
-left/right reversals of :mod:`nav_eval.anatomy`) the estimates drift up, and which action looks
-best is decided by the estimation error rather than by the task.
+left/right reversals of :mod:`nav_eval.analysis.anatomy`) the estimates drift up, and which
+action looks best is decided by the estimation error rather than by the task.
 
 A time-out's return after the limit is unknown, so the comparison with returns uses the episodes
 that ended; a second measure needs no returns and takes every decision: the share whose Q-value
@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from nav_gym import run_dir as layout
+from nav_gym.run_dir import read_traces
 
 #: decisions taken closer to the goal than this (m) form the "near" band: the final approach
 NEAR_GOAL = 0.25
@@ -96,7 +96,7 @@ def set_values(eval_dir: Path, set_name: str, reward: Any,
     ``reward``: the run's TrainConfig; ``seeds``: only these (an earlier evaluation of other
     seeds leaves its traces in the same folder); an unreadable trace is left out.
     """
-    return traces_values(layout.read_traces(eval_dir, set_name, seeds), reward)
+    return traces_values(read_traces(eval_dir, set_name, seeds), reward)
 
 
 def traces_values(traces: Iterable[tuple[Path, dict[str, Any]]], reward: Any,

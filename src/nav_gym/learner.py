@@ -1,4 +1,4 @@
-"""Double DQN: SB3's DQN with van Hasselt et al.'s (2016) target, for the overestimation diagnosis.
+"""The learner: SB3's DQN, or Double DQN (van Hasselt et al. 2016), timed into the step budget.
 
 The workshop's learner is SB3's ``DQN``: its TD target takes the *maximum* of the target
 network's Q-values at the next observation, which overestimates where the actions' true values
@@ -9,10 +9,13 @@ format) is SB3's: a Double DQN checkpoint loads with ``DQN.load`` like any other
 
 Not the workshop's learner and never a default (``double_q: false`` in config/train.yaml): it
 exists to test whether the learning target's misses come from the learner's overestimation
-(docs/experiments.md).
+(docs/experiments.md).  :func:`learner_class` picks the class a run trains with.
 """
 
 from __future__ import annotations
+
+import time
+from typing import Any
 
 import numpy as np
 import torch as th
@@ -60,3 +63,39 @@ class DoubleDQN(DQN):
         self._n_updates += gradient_steps
         self.logger.record('train/n_updates', self._n_updates, exclude='tensorboard')
         self.logger.record('train/loss', np.mean(losses))
+
+
+def learner_class(timing: Any | None = None, double_q: bool = False) -> type:
+    """Return a DQN class that counts its gradient steps and predictions into ``timing``.
+
+    ``timing`` is the env's step budget (``env.timing``): SB3's ``train`` (gradient steps) and
+    ``predict`` calls become the learner's share of every env step.  A subclass, not wrappers
+    set on the model, so the timing never becomes model state that saving would pickle; a
+    checkpoint of it loads with ``DQN.load`` as any other.  The learner is SB3's DQN, or with
+    ``double_q`` :class:`DoubleDQN` (a diagnosis, not the workshop's learner); without
+    ``timing`` that class itself is returned, untimed.
+    """
+    learner = DoubleDQN if double_q else DQN
+    if timing is None:
+        return learner
+
+    class TimedDQN(learner):  # type: ignore[misc, valid-type]
+        """The learner (SB3's DQN or Double DQN) with its ``train`` and ``predict`` timed."""
+
+        def train(self, *args: Any, **kwargs: Any) -> Any:
+            """Run SB3's gradient steps, timed as ``gradient_step``."""
+            start = time.perf_counter()
+            try:
+                return super().train(*args, **kwargs)
+            finally:
+                timing.add('gradient_step', time.perf_counter() - start)
+
+        def predict(self, *args: Any, **kwargs: Any) -> Any:
+            """Run SB3's ``predict``, timed as ``predict``."""
+            start = time.perf_counter()
+            try:
+                return super().predict(*args, **kwargs)
+            finally:
+                timing.add('predict', time.perf_counter() - start)
+
+    return TimedDQN

@@ -1,0 +1,65 @@
+"""Plain functions the test modules share: the one wait, a free TCP port, Ctrl-C for a node.
+
+Fixtures live in ``conftest.py``.  These live here because ``conftest`` is no importable name:
+pytest imports every folder's conftest.py as a module named ``conftest``, so a test module
+gets them with ``from helpers import wait_until`` (pytest puts ``test/`` on ``sys.path``).
+"""
+
+from __future__ import annotations
+
+import signal
+import socket
+import subprocess
+import time
+from collections.abc import Callable
+from typing import TypeVar
+
+import pytest
+
+T = TypeVar('T')
+
+
+def wait_until(predicate: Callable[[], T], timeout: float, what: str,
+               interval: float = 0.02, details: Callable[[], object] | None = None) -> T:
+    """Poll ``predicate`` until it returns something truthy, and return that value.
+
+    Once ``timeout`` seconds have passed without it, the test fails with
+    ``'<what>: not within <timeout> s'`` (and ``details()``, if given: what is known only
+    then, such as a child process's output).  The predicate may do work between checks (step
+    a sim, read a file): it is called once more after the deadline before the test fails.
+    Between calls it sleeps ``interval`` or the time left, whichever is shorter, never a
+    negative time; ``interval=0`` polls back to back.
+    """
+    deadline = time.monotonic() + timeout
+    while True:
+        value = predicate()
+        if value:
+            return value
+        left = deadline - time.monotonic()
+        if left <= 0:
+            more = f'\n{details()}' if details is not None else ''
+            pytest.fail(f'{what}: not within {timeout} s{more}')
+        time.sleep(min(interval, left))
+
+
+def free_port() -> int:
+    """Return a TCP port on 127.0.0.1 that nothing listens on (the OS picks one)."""
+    with socket.socket() as sock:
+        sock.bind(('127.0.0.1', 0))
+        return sock.getsockname()[1]
+
+
+def interrupt(process: subprocess.Popen, timeout: float = 15.0) -> tuple[int, str]:
+    """Press Ctrl-C (SIGINT) on a child started with text pipes; its exit code and output.
+
+    A child that has exited already is only reaped; one still running ``timeout`` seconds
+    after the SIGINT is killed (and its exit code says so).
+    """
+    if process.poll() is None:
+        process.send_signal(signal.SIGINT)
+    try:
+        out, err = process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        out, err = process.communicate()
+    return process.returncode, out + err
