@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from nav_gym.actions import ACTION_NAMES
+from nav_gym.actions import ACTION_NAMES, action_twists
 from nav_gym.config import EnvConfig
 from nav_gym.errors import InvalidActionError, ResetNeededError
 from nav_gym.observation import OBS_SHAPE, image_msg_to_observation
@@ -71,9 +71,7 @@ class NavigationEnv(gym.Env):
         self.render_mode = render_mode
         self.observation_space = spaces.Box(0, 255, OBS_SHAPE, np.uint8)
         self.action_space = spaces.Discrete(len(ACTION_NAMES))
-        cfg = self.config
-        self._actions = {0: (cfg.turn_speed, cfg.turn_rate), 1: (cfg.forward_speed, 0.0),
-                         2: (cfg.turn_speed, -cfg.turn_rate)}
+        self._actions = action_twists(self.config)
         self._sim_process: SimProcess | None = None
         self._client: SimClient | None = None
         self._frame: Frame | None = None

@@ -55,6 +55,9 @@ CURVE = 'curve'
 # RUN/report/
 REPORT = 'report'
 REPORT_TEXT = 'Result.md'
+#: settings whose default has changed: a run whose config does not name one (it was saved
+#: before the setting existed) trained with this value (SB3's DQN before Double DQN targets)
+LEGACY_DEFAULTS = {'double_q': False}
 #: the run settings evaluation must share with training (compared by the diagnosis)
 EVAL_SETTINGS = ('sim_params', 'forward_speed', 'turn_rate', 'turn_speed', 'max_episode_steps',
                  'progress_weight', 'step_penalty', 'goal_reward', 'collision_penalty')
@@ -67,14 +70,23 @@ class RunDirError(TrainConfigError):
 def load_config(run_dir: str | Path) -> TrainConfig:
     """Return the TrainConfig a run was trained with, or raise RunDirError saying what is wrong.
 
-    A config.yaml of an older run (without the settings added since) loads with the defaults
-    of the missing settings, which were the values of that time.
+    A config.yaml of an older run (without the settings added since) loads with the values of
+    that time for the missing settings (:func:`run_settings`).
     """
     path = Path(run_dir) / CONFIG
     if not path.is_file():
         raise RunDirError(f'{run_dir} is not a training run directory (no {CONFIG}); train one '
                           'with `ros2 run nav_gym train`')
-    return TrainConfig(**load_yaml(path))
+    return TrainConfig(**run_settings(load_yaml(path)))
+
+
+def run_settings(values: dict[str, Any]) -> dict[str, Any]:
+    """Return a run's saved settings with the values of its time for those it does not name.
+
+    A setting added since takes its default, which was its value then, except where the
+    default changed since (:data:`LEGACY_DEFAULTS`).
+    """
+    return {**LEGACY_DEFAULTS, **values}
 
 
 def is_run_dir(path: Path) -> bool:

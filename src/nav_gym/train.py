@@ -51,7 +51,7 @@ from nav_gym.run_dir import (
     load_config,
 )
 from nav_gym.timing import EnvTimer, quiet_learner_threads
-from nav_gym.train_config import TrainConfig
+from nav_gym.train_config import LearnerSpec, TrainConfig
 from nav_sim.errors import NavSimError
 
 RESUME_COMMAND = 'nav-gym-train --resume'
@@ -140,12 +140,16 @@ def delete_replay_buffer(run_dir: Path) -> None:
     (folder / REPLAY_BUFFER).unlink(missing_ok=True)
 
 
-def load_model(path: Path, env: Any, device: str, double_q: bool = False) -> Any:
-    """Load a DQN checkpoint (timed as :func:`build_model`'s) or raise CheckpointError."""
-    from nav_gym.learner import learner_class  # torch: after quiet_learner_threads()
+def load_model(path: Path, env: Any, device: str, learner: LearnerSpec | None = None) -> Any:
+    """Load a checkpoint to train ``learner`` (timed as :func:`build_model`'s).
+
+    Raises CheckpointError when the file is corrupt or incompatible.
+    """
+    from nav_gym.learner import load_checkpoint  # torch: after quiet_learner_threads()
     try:
-        return learner_class(env.unwrapped.timing if env is not None else None, double_q).load(
-            path, env=env, device=device)
+        return load_checkpoint(path, learner or LearnerSpec(),
+                               env.unwrapped.timing if env is not None else None, env=env,
+                               device=device)
     except (zipfile.BadZipFile, EOFError, KeyError, ValueError, RuntimeError, OSError,
             AssertionError) as exc:
         raise CheckpointError(
@@ -198,16 +202,18 @@ def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> tuple[Any, En
 def build_model(config: TrainConfig, run_dir: Path, env: Any, resume: bool) -> Any:
     """Return a new DQN, or the newest checkpoint's with its replay buffer when it has one."""
     if not resume:
-        from nav_gym.learner import learner_class  # torch: after quiet_learner_threads()
+        # torch: after quiet_learner_threads()
+        from nav_gym.learner import learner_class, learner_kwargs, learner_policy
+        learner = config.learner()
         # the learner's share of every env step is counted into the env's step budget
-        return learner_class(env.unwrapped.timing, config.double_q)(
-            'CnnPolicy', env, tensorboard_log=str(run_dir / TENSORBOARD), verbose=0,
-            **config.dqn_kwargs())
+        return learner_class(env.unwrapped.timing, learner)(
+            learner_policy(learner), env, tensorboard_log=str(run_dir / TENSORBOARD), verbose=0,
+            **config.dqn_kwargs(), **learner_kwargs(learner, config.gamma))
     found = checkpoints(run_dir)
     if not found:
         raise CheckpointError(f'no checkpoint in {run_dir / CHECKPOINTS} to resume from')
     steps, path = found[-1]
-    model = load_model(path, env, config.device, config.double_q)
+    model = load_model(path, env, config.device, config.learner())
     model.tensorboard_log = str(run_dir / TENSORBOARD)
     buffer = run_dir / CHECKPOINTS / REPLAY_BUFFER
     buffer_step = _buffer_step(run_dir / CHECKPOINTS / REPLAY_BUFFER_STEP)

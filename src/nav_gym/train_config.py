@@ -1,6 +1,8 @@
-"""Training configuration: the workshop's DQN settings and the run's whole EnvConfig.
+"""Training configuration: the learner, the workshop's DQN settings and the run's whole EnvConfig.
 
 Overridable from YAML and the command line; the effective configuration is saved with each run.
+Light imports only (no torch): :class:`LearnerSpec` names the learner, :mod:`nav_gym.learner`
+builds it.
 """
 
 from __future__ import annotations
@@ -20,6 +22,8 @@ from nav_sim.errors import ConfigError
 from nav_sim.sim_process import typed_params
 
 _ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
+#: the components' flags (LearnerSpec fields): each at its default is that component off
+COMPONENTS = ('n_steps', 'dueling', 'augment_shift', 'prioritized_replay')
 
 
 def _env(name: str) -> Any:
@@ -28,8 +32,81 @@ def _env(name: str) -> Any:
 
 
 @dataclass(frozen=True)
+class LearnerSpec:
+    """Which learner a run trains: the TD target and the components (TrainConfig's fields).
+
+    Each component has a published basis; all of them off is the default learner, SB3's DQN
+    with Double DQN targets, and ``double_q: false`` with all of them off is SB3's DQN untouched
+    (the workshop's learner).  :mod:`nav_gym.learner` builds it.
+    """
+
+    double_q: bool = setting(True, 'Double DQN targets (van Hasselt et al. 2016): the online '
+                             "network picks the next action, the target network values it; false: "
+                             "SB3's DQN target (with every component off, the workshop's learner, "
+                             "SB3's DQN exactly)")
+    n_steps: int = setting(1, "n-step returns (SB3's NStepReplayBuffer); 1: one-step targets")
+    dueling: bool = setting(False, 'a dueling head, Q = V + A - mean(A) (Wang et al. 2016)')
+    augment_shift: int = setting(0, 'shift every sampled observation at random by up to this '
+                                 'many pixels, edges replicated (DrQ, Kostrikov et al. 2021; '
+                                 'RAD); 0: off')
+    prioritized_replay: bool = setting(False, 'proportional prioritized replay with importance '
+                                       'weights (Schaul et al. 2016)')
+    priority_alpha: float = setting(0.6, 'prioritized replay: priority = (|TD error| + '
+                                    'eps)^alpha')
+    priority_beta: float = setting(0.4, 'prioritized replay: importance-weight exponent at the '
+                                   'start, annealed linearly to 1')
+
+    def __post_init__(self) -> None:
+        """Refuse values the learner cannot use (TrainConfigError naming the setting)."""
+        if int(self.n_steps) < 1:
+            raise TrainConfigError(f'n_steps must be >= 1, got {self.n_steps!r}')
+        if int(self.augment_shift) < 0:
+            raise TrainConfigError(f'augment_shift must be >= 0, got {self.augment_shift!r}')
+        for name in ('priority_alpha', 'priority_beta'):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise TrainConfigError(f'{name} must be within [0, 1], got '
+                                       f'{getattr(self, name)!r}')
+
+    @property
+    def vanilla(self) -> bool:
+        """Tell whether this is SB3's DQN untouched (no Double DQN target, no component)."""
+        return not self.double_q and all(
+            getattr(self, f.name) == f.default for f in dataclasses.fields(self)
+            if f.name in COMPONENTS)
+
+    def describe(self) -> str:
+        """Name the learner as the report and Sweep.md write it."""
+        parts = ['DQN (SB3) with Double DQN targets (van Hasselt et al. 2016)'
+                 if self.double_q else 'DQN (SB3)']
+        if self.n_steps > 1:
+            parts.append(f'{self.n_steps}-step returns')
+        if self.dueling:
+            parts.append('a dueling head (Wang et al. 2016)')
+        if self.augment_shift:
+            parts.append(f'random shifts of up to {self.augment_shift} px (DrQ, Kostrikov et al. '
+                         '2021)')
+        if self.prioritized_replay:
+            parts.append(f'prioritized replay (Schaul et al. 2016, alpha {self.priority_alpha}, '
+                         f'beta {self.priority_beta} to 1)')
+        return ', '.join(parts)
+
+
+_LEARNER_FIELDS = {f.name: f for f in dataclasses.fields(LearnerSpec)}
+
+
+def learner_of(settings: dict[str, Any]) -> LearnerSpec:
+    """Return the learner a mapping of training settings names (its other keys ignored)."""
+    return LearnerSpec(**{k: v for k, v in settings.items() if k in _LEARNER_FIELDS})
+
+
+def _learner(name: str) -> Any:
+    """Declare a field with the default and description of the LearnerSpec field ``name``."""
+    return setting(_LEARNER_FIELDS[name].default, _LEARNER_FIELDS[name].metadata['help'])
+
+
+@dataclass(frozen=True)
 class TrainConfig:
-    """DQN('CnnPolicy') on Monitor(NavigationEnv); defaults are the workshop's."""
+    """The learner on Monitor(NavigationEnv): Double DQN targets, the workshop's settings."""
 
     total_timesteps: int = setting(50_000, 'environment steps to train for')
     learning_rate: float = setting(1e-4, 'optimiser step size')
@@ -44,9 +121,13 @@ class TrainConfig:
     exploration_initial_eps: float = setting(1.0, 'initial epsilon (SB3 default)')
     exploration_final_eps: float = setting(0.05, 'final epsilon')
     seed: int = setting(9, 'seed of DQN, the env and its scenario sequence')
-    double_q: bool = setting(False, "Double DQN targets instead of the workshop's DQN (a "
-                             'diagnosis of overestimation, not the workshop learner; see '
-                             'nav_gym.learner)')
+    double_q: bool = _learner('double_q')
+    n_steps: int = _learner('n_steps')
+    dueling: bool = _learner('dueling')
+    augment_shift: int = _learner('augment_shift')
+    prioritized_replay: bool = _learner('prioritized_replay')
+    priority_alpha: float = _learner('priority_alpha')
+    priority_beta: float = _learner('priority_beta')
     checkpoint_freq: int = setting(10_000, 'steps between checkpoints (all are kept)')
     save_replay_buffer: bool = setting(True, 'save the replay buffer with checkpoints (for '
                                        '--resume)')
@@ -85,6 +166,7 @@ class TrainConfig:
             raise TrainConfigError('learning_starts must be >= 0')
         if not 0 < self.exploration_fraction <= 1:
             raise TrainConfigError('exploration_fraction must be in (0, 1]')
+        self.learner()  # the learner's own checks
         if self.sim_params is None:
             object.__setattr__(self, 'sim_params', {})
         if not isinstance(self.sim_params, dict):
@@ -96,8 +178,15 @@ class TrainConfig:
         values['sim_params'] = dict(self.sim_params)
         return EnvConfig(**{**values, **overrides})
 
+    def learner(self) -> LearnerSpec:
+        """Return which learner this config trains (the TD target and the components)."""
+        return learner_of(dataclasses.asdict(self))
+
     def dqn_kwargs(self) -> dict[str, Any]:
-        """Return the keyword arguments of ``DQN(...)`` this config sets."""
+        """Return the hyperparameters of ``DQN(...)`` this config sets.
+
+        What the learner itself adds is :func:`nav_gym.learner.learner_kwargs`.
+        """
         keys = ('learning_rate', 'buffer_size', 'learning_starts', 'batch_size', 'gamma',
                 'train_freq', 'gradient_steps', 'target_update_interval',
                 'exploration_fraction', 'exploration_initial_eps', 'exploration_final_eps',

@@ -76,6 +76,19 @@ def wheels_to_twist(left: float, right: float, config: SimConfig) -> tuple[float
     return linear, angular
 
 
+def arc_step(x: float, y: float, yaw: float, linear: float, angular: float, radius: float,
+             straight: bool, dt: float) -> tuple[float, float, float]:
+    """Return the pose after ``dt`` on the exact differential-drive arc of a body twist.
+
+    ``radius`` is ``linear / angular`` (unused when ``straight``, i.e. ``|angular| < 1e-9``).
+    The one definition of how the robot moves: the sim's physics steps and the planner's.
+    """
+    if straight:
+        return x + linear * dt * math.cos(yaw), y + linear * dt * math.sin(yaw), yaw + angular * dt
+    return (x + radius * (math.sin(yaw + angular * dt) - math.sin(yaw)),
+            y - radius * (math.cos(yaw + angular * dt) - math.cos(yaw)), yaw + angular * dt)
+
+
 @dataclass(frozen=True)
 class StepResult:
     """Outcome of one control period."""
@@ -201,12 +214,7 @@ class NavSim:
         path_length, total = self.path_length, self.total_physics_steps
         event, done_steps = EVENT_NONE, 0
         for _ in range(steps):
-            if straight:
-                nx, ny = x + linear * dt * math.cos(yaw), y + linear * dt * math.sin(yaw)
-            else:
-                nx = x + radius * (math.sin(yaw + angular * dt) - math.sin(yaw))
-                ny = y - radius * (math.cos(yaw + angular * dt) - math.cos(yaw))
-            nyaw = yaw + angular * dt
+            nx, ny, nyaw = arc_step(x, y, yaw, linear, angular, radius, straight, dt)
             path_length += math.hypot(nx - x, ny - y)
             x, y, yaw = nx, ny, nyaw
             qpos[pose_slice] = (x, y, yaw)

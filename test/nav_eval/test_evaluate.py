@@ -26,13 +26,19 @@ SETS = ['random_train', 'dqn_heldout', 'early_train', 'explore_heldout']
 
 @pytest.fixture(scope='module')
 def run_dir(tmp_path_factory, spaces_only) -> Path:
-    """Make a run directory with a tiny model (two checkpoints) and a 15-step episode limit."""
-    from stable_baselines3 import DQN
+    """Make a run directory with a tiny model (two checkpoints) and a 15-step episode limit.
+
+    The model is the default learner's (Double DQN targets and every component the default
+    turns on): evaluation, report and diagnosis run on its checkpoints.
+    """
+    from nav_gym.learner import learner_class, learner_kwargs, learner_policy
     path = tmp_path_factory.mktemp('run')
     config = TrainConfig(max_episode_steps=15)
     (path / 'config.yaml').write_text(config.to_yaml())
-    model = DQN('CnnPolicy', spaces_only(), buffer_size=64, learning_starts=16, batch_size=8,
-                seed=3, device='cpu')
+    learner = config.learner()
+    model = learner_class(None, learner)(
+        learner_policy(learner), spaces_only(), buffer_size=64, learning_starts=16, batch_size=8,
+        seed=3, device='cpu', **learner_kwargs(learner, config.gamma))
     (path / 'checkpoints').mkdir()
     model.learn(32)
     model.save(path / 'checkpoints' / 'dqn_32_steps.zip')

@@ -333,3 +333,29 @@ def test_malformed_inputs_are_reported_not_fatal(tmp_path: Path) -> None:
     text = run_report.write_report(run).read_text()
     assert '**Unreadable input:** `validation.json` could not be read' in text
     assert '## 4. Evaluation' in text and '## 8. Reproduce' in text
+
+
+def test_the_learner_and_its_defaults_read_the_same_in_yaml_config_and_report(
+        tmp_path: Path) -> None:
+    import dataclasses
+
+    import yaml
+
+    from nav_gym.train_config import TrainConfig
+    defaults = dataclasses.asdict(TrainConfig())
+    shipped = yaml.safe_load((Path(__file__).parents[2] / 'config' / 'train.yaml').read_text())
+    make_training(tmp_path)
+    summary = json.loads((tmp_path / 'summary.json').read_text())
+    write_json(tmp_path / 'summary.json', {**summary, 'config': defaults})  # a run of today
+    text = run_report.write_report(tmp_path).read_text()
+    assert f'**Learner:** {TrainConfig().learner().describe()}, `CnnPolicy`.' in text
+    for key in run_report.HYPERPARAMETERS:
+        value = json.dumps(defaults[key]) if isinstance(defaults[key], dict) else defaults[key]
+        assert shipped[key] == defaults[key], key
+        assert f'| {key} | {value} |' in text, key
+
+
+def test_a_run_from_before_double_dqn_is_reported_as_sb3_dqn(tmp_path: Path) -> None:
+    make_training(tmp_path)  # its config names no double_q: it trained SB3's DQN
+    text = run_report.write_report(tmp_path).read_text()
+    assert '**Learner:** DQN (SB3), `CnnPolicy`.' in text and '| double_q | False |' in text

@@ -67,7 +67,8 @@ def test_a_two_seed_sweep_trains_evaluates_and_aggregates(finished):
         assert re.search(rf'\] done  seed{seed} in \d+ s: held-out success \d+%', result.stdout)
     baselines = json.loads((folder / 'baselines' / f'{CONFIG}.json').read_text())
     assert [s['name'] for s in baselines['sets']] == ['random_train', 'random_heldout',
-                                                      'servo_train', 'servo_heldout']
+                                                      'servo_train', 'servo_heldout',
+                                                      'oracle_train', 'oracle_heldout']
     assert 'ETA' in result.stdout and 'start seed1' in result.stdout
     report = (folder / 'Sweep.md').read_text()
     for heading in SECTIONS:
@@ -82,8 +83,11 @@ def test_a_two_seed_sweep_trains_evaluates_and_aggregates(finished):
     assert {(r['seed'], r['config']) for r in results['anatomy']} >= {(1, CONFIG), (2, CONFIG),
                                                                       ('all', CONFIG)}
     assert iqm['low'] <= iqm['point'] <= iqm['high']
-    assert {r['policy'] for r in results['banks']} == {'random', 'servo',
+    assert {r['policy'] for r in results['banks']} == {'random', 'servo', 'oracle',
                                                        'DQN final (all seeds pooled)'}
+    gap = results['oracle_gap'][CONFIG]
+    assert gap['gap'] == gap['oracle'] - iqm['point']  # 12 decisions: too few for the oracle
+    assert f'Gap to the oracle, `{CONFIG}`' in (folder / 'Sweep.md').read_text()
 
 
 def test_trials_ran_at_once_in_different_domains(finished):

@@ -190,6 +190,8 @@ def test_a_run_saves_its_whole_env_config(tmp_path):
     # a run from before these settings existed still loads, with the defaults of that time
     (tmp_path / 'config.yaml').write_text('learning_rate: 0.0001\nforward_speed: 0.12\n')
     assert load_config(tmp_path).env_config() == EnvConfig()
+    # it trained SB3's DQN: the default of double_q has changed since, not the run
+    assert load_config(tmp_path).double_q is False and TrainConfig().double_q is True
 
 
 def test_train_yaml_holds_every_default():

@@ -1,7 +1,8 @@
-"""Scripted baselines on both scenario banks: how hard each bank is without any learning.
+"""Baselines on both scenario banks: how hard each bank is without any learning.
 
-The uniform-random policy and the image-only servo (:mod:`nav_eval.evaluation.policies`) run
-on the training and the held-out seeds through the same environment a run trains on (its sim
+The uniform-random policy, the image-only servo and the privileged oracle (the ceiling: a plan
+on the true map driven with the same actions; :mod:`nav_eval.evaluation.policies`) run on the
+training and the held-out seeds through the same environment a run trains on (its sim
 settings, action speeds and episode limit).  The result has the shape of an evaluation's
 ``results.json`` (one entry per set with its summary and episodes), so the sweep's statistics
 read both alike.
@@ -13,13 +14,11 @@ from typing import Any
 
 from nav_eval.analysis import metrics
 from nav_eval.errors import EvaluationError
-from nav_eval.evaluation.policies import Policy, RandomPolicy, ServoPolicy
+from nav_eval.evaluation.policies import OraclePolicy, Policy, RandomPolicy, ServoPolicy
 from nav_eval.evaluation.runner import env_for_run, run_episode
+from nav_eval.evaluation.sets import BASELINE_POLICIES, SPLITS
 from nav_gym.train_config import TrainConfig
 from nav_sim.config import SimConfig
-
-BASELINE_POLICIES = ('random', 'servo')
-SPLITS = ('train', 'heldout')
 
 
 def make_policy(name: str, config: TrainConfig) -> Policy:
@@ -29,6 +28,8 @@ def make_policy(name: str, config: TrainConfig) -> Policy:
     if name == 'servo':
         sim = SimConfig.from_params(config.sim_params)
         return ServoPolicy.for_actions(config.turn_rate, sim.ctrl_dt, sim.camera_hfov_deg)
+    if name == 'oracle':
+        return OraclePolicy(config)
     raise EvaluationError(f'unknown baseline policy {name!r}; known: {BASELINE_POLICIES}')
 
 

@@ -1,7 +1,10 @@
-"""Policies for evaluation, each acting on the observation image only.
+"""Policies for evaluation: the learned one and the baselines.
 
 The frozen DQN (deterministic, with its Q-values), a seeded uniform-random baseline and a
-scripted visual servo; for diagnosis, the frozen DQN with training's final exploration.
+scripted visual servo act on the observation image only; for diagnosis, the frozen DQN with
+training's final exploration.  The oracle is the one privileged baseline: it follows the true
+state (the scenario and the robot's pose) and never sees an image; nothing it computes reaches
+the learner or an observation.
 """
 
 from __future__ import annotations
@@ -14,6 +17,10 @@ import numpy as np
 
 from nav_eval.analysis.failure_layers import centre_band, goal_bearing, servo_action
 from nav_eval.errors import EvaluationError
+from nav_gym.actions import action_twists
+from nav_sim.planner import Planner
+from nav_sim.scenarios import build_banks, sample_scenario
+from nav_sim.world import load_arena
 
 
 class Policy(Protocol):
@@ -141,13 +148,76 @@ def load_dqn(path: Path, device: str = 'cpu') -> Any:
     """Load a DQN checkpoint for inference, or raise EvaluationError saying what to do."""
     import zipfile
 
-    from stable_baselines3 import DQN
+    from nav_gym.learner import load_checkpoint
     if not path.is_file():
         raise EvaluationError(f'checkpoint {path} not found; train first with '
                               '`ros2 run nav_gym train` or pass --checkpoint')
     try:
-        return DQN.load(path, device=device)
+        return load_checkpoint(path, device=device)
     except (zipfile.BadZipFile, EOFError, KeyError, ValueError, RuntimeError, OSError,
             AssertionError) as exc:
         raise EvaluationError(f'checkpoint {path} is corrupt or incompatible '
                               f'({type(exc).__name__}: {exc})') from exc
+
+
+class OraclePolicy:
+    """Drive a plan made on the true map with the env's three actions: the task's ceiling.
+
+    A privileged evaluation baseline (:mod:`nav_sim.planner`): from the scenario's exact layout,
+    start and goal it plans the fewest actions that reach the goal within the episode limit, and
+    replans from the robot's true pose whenever the pose is not where the plan put it.  It asks
+    how many scenarios the actions, the decision period and the step limit can solve at all;
+    where it finds no plan it turns left, and its episode times out.  The runner tells it the
+    env's ``info`` after the reset and every step (:meth:`follow`); it ignores the image.
+    """
+
+    name = 'oracle'
+
+    def __init__(self, config: Any) -> None:
+        """Plan in the world, with the actions and the episode limit, of a TrainConfig."""
+        self.geometry, self.sim = load_arena(config.sim_params)
+        self.planner = Planner(self.geometry, self.sim, action_twists(config.env_config()))
+        self.banks = build_banks(self.sim, self.geometry)
+        self.max_steps = config.max_episode_steps
+        self.scenario: Any = None
+        self.plan: list[int] = []
+        self.expected: tuple[float, float, float] | None = None
+        self.steps = 0
+
+    def begin_episode(self, seed: int) -> None:
+        """Start an episode (the plan comes with the reset's ``info``)."""
+        self.scenario, self.plan, self.expected, self.steps = None, [], None, 0
+
+    def follow(self, info: dict[str, Any]) -> None:
+        """Take the true state after a reset (the scenario) or a step (the pose)."""
+        if 'scenario' in info:  # a reset: the exact scenario from its seed and split
+            self.scenario = sample_scenario(info['seed'], info['split'], self.banks,
+                                            self.geometry, self.sim)
+            self.steps = 0
+            self._replan(tuple(info['pose']))
+            return
+        self.steps = int(info['step'])
+        pose = tuple(info['pose'])
+        if self.expected is None or not _same_pose(pose, self.expected):
+            self._replan(pose)
+
+    def _replan(self, pose: tuple[float, float, float]) -> None:
+        sc = self.scenario
+        self.plan = self.planner.plan(sc.layout, pose, sc.goal, self.max_steps - self.steps) or []
+        self.expected = pose
+
+    def act(self, observation: np.ndarray) -> tuple[int, list[float] | None]:
+        """Take the plan's next action (the image is ignored); left without a plan."""
+        if not self.plan or self.expected is None:
+            return 0, None
+        action = self.plan.pop(0)
+        self.expected, _ = self.planner.drive(self.expected, action, self.scenario.layout,
+                                              self.scenario.goal)
+        return action, None
+
+
+def _same_pose(a: tuple[float, ...], b: tuple[float, ...], tolerance: float = 1e-6) -> bool:
+    """Tell whether two poses agree (positions in m, headings in rad, modulo a turn)."""
+    turn = math.remainder(a[2] - b[2], 2.0 * math.pi)
+    return abs(a[0] - b[0]) <= tolerance and abs(a[1] - b[1]) <= tolerance and \
+        abs(turn) <= tolerance

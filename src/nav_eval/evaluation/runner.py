@@ -50,6 +50,10 @@ def run_episode(env: NavigationEnv, policy: Policy, seed: int, split: str,
     if recorder is not None:
         _recorded(recorder, env.last_stamp_ns)
     policy.begin_episode(seed)
+    # a privileged baseline (the oracle) follows the true state; no other policy sees it
+    follow = getattr(policy, 'follow', None)
+    if follow is not None:
+        follow(info)
     frames, steps = [obs], []
     total, truncated, event = 0.0, False, 'none'
     step_info: dict[str, Any] = {'distance': info['distance'], 'path_length': 0.0}
@@ -57,6 +61,8 @@ def run_episode(env: NavigationEnv, policy: Policy, seed: int, split: str,
         action, q_values = policy.act(obs)
         env.note_q_values(q_values)  # for the live view and the bag's /visnav/step
         obs, reward, terminated, truncated, step_info = env.step(action)
+        if follow is not None:
+            follow(step_info)
         if recorder is not None:
             _recorded(recorder, env.last_stamp_ns)
         frames.append(obs)

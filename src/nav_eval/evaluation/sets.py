@@ -20,6 +20,9 @@ SET_LABELS = {
     'explore_heldout': 'DQN final with training ε, held-out seeds'}
 #: the workshop's evaluation: deterministic policies only
 DEFAULT_SETS = ('random_train', 'dqn_train', 'dqn_heldout', 'early_train', 'early_heldout')
+#: the baselines of a sweep's configurations, each on both splits (``<policy>_<split>`` sets)
+BASELINE_POLICIES = ('random', 'servo', 'oracle')
+SPLITS = ('train', 'heldout')
 #: evaluation set kind (its name's first word) -> the policy that plays it
 SET_POLICIES = {'random': 'random', 'dqn': 'dqn', 'early': 'dqn', 'explore': 'explore'}
 

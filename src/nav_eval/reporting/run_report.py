@@ -55,18 +55,20 @@ from nav_gym.run_dir import (
     is_run_dir,
     parse_checkpoint_name,
     read_traces,
+    run_settings,
 )
+from nav_gym.train_config import learner_of
 
 SECTIONS = ('1. Observation and action checks', '2. Training',
             '3. Early vs final checkpoint comparison', '4. Evaluation',
             '5. Representative trajectories', '6. Failure diagnosis',
             '7. Attempts and targeted improvements', '8. Reproduce')
-HYPERPARAMETERS = ('learning_rate', 'buffer_size', 'learning_starts', 'batch_size', 'gamma',
-                   'train_freq', 'gradient_steps', 'target_update_interval',
-                   'exploration_fraction', 'exploration_initial_eps', 'exploration_final_eps',
-                   'double_q', 'seed', 'split', 'max_episode_steps', 'forward_speed', 'turn_rate',
-                   'turn_speed',
-                   'sim_params')
+HYPERPARAMETERS = ('double_q', 'n_steps', 'dueling', 'augment_shift', 'prioritized_replay',
+                   'priority_alpha', 'priority_beta', 'learning_rate', 'buffer_size',
+                   'learning_starts', 'batch_size', 'gamma', 'train_freq', 'gradient_steps',
+                   'target_update_interval', 'exploration_fraction', 'exploration_initial_eps',
+                   'exploration_final_eps', 'seed', 'split', 'max_episode_steps', 'forward_speed',
+                   'turn_rate', 'turn_speed', 'sim_params')
 EVAL_COLUMNS = ('Set', 'Policy', 'Split', 'Episodes', 'Success rate', 'Collision rate',
                 'Timeout rate', 'Mean length', 'Mean SPL', 'Mean return')
 
@@ -161,9 +163,11 @@ def section_training(run: Run) -> list[str]:
                  f"{'yes' if summary.get('interrupted') else 'no'})"]]
         lines += ['**Training information**', ''] + table(['Item', 'Value'], rows)
     if config:
-        rows = [[key, json.dumps(config[key]) if isinstance(config[key], dict) else config[key]]
-                for key in HYPERPARAMETERS if key in config]
-        lines += ['**Hyperparameters** (DQN `CnnPolicy`)', ''] + table(['Setting', 'Value'], rows)
+        settings = run_settings(config)
+        rows = [[key, json.dumps(settings[key]) if isinstance(settings[key], dict)
+                 else settings[key]] for key in HYPERPARAMETERS if key in settings]
+        lines += [f'**Learner:** {learner_of(settings).describe()}, `CnnPolicy`.', '',
+                  '**Hyperparameters**', ''] + table(['Setting', 'Value'], rows)
     if not (run.path / MONITOR).is_file():
         return lines + missing('`monitor.csv` (episode returns and lengths)', 'nav-gym-train')
     data = plots.monitor_arrays(run.path / MONITOR)

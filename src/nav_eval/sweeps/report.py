@@ -44,7 +44,7 @@ from nav_gym.run_dir import (
     load_config,
     read_traces,
 )
-from nav_gym.train_config import TrainConfig
+from nav_gym.train_config import TrainConfig, learner_of
 
 FINAL_SETS = {'train': 'dqn_train', 'heldout': 'dqn_heldout'}
 BOOKKEEPING = ('seed', 'run_name', 'runs_dir', 'device', 'namespace', 'sim', 'sim_timeout',
@@ -249,6 +249,19 @@ def bank_rows(folder: Path, groups: dict[str, list[dict]]) -> list[dict[str, Any
     return rows
 
 
+def oracle_gaps(banks: list[dict[str, Any]], aggregates: dict[str, Any]
+                ) -> dict[str, dict[str, float]]:
+    """Return per configuration the oracle's held-out success, the IQM's and the gap."""
+    out = {}
+    for row in banks:
+        iqm = aggregates.get('success_rate', {}).get(row['config'], {}).get('IQM')
+        if row['policy'] == 'oracle' and iqm:
+            oracle = row['heldout']['point']
+            out[row['config']] = {'oracle': oracle, 'iqm': iqm['point'],
+                                  'gap': oracle - iqm['point']}
+    return out
+
+
 def _ci(estimate: dict[str, float] | None, digits: int = 0) -> str:
     if not estimate:
         return '–'
@@ -274,6 +287,8 @@ def _markdown(folder: Path, data: dict[str, Any], figures: dict[str, str]) -> st
                             + [_ci(est[a]) for a in stats.AGGREGATES])
     lines += table(['Configuration', 'Held-out', 'Seeds', *stats.AGGREGATES], rows)
     lines += ['The optimality gap of the collision rate is its gap to 0 collisions.', '']
+    lines += ['Learners:', ''] + [f'- `{config}`: {learner_of(settings).describe()}'
+                                  for config, settings in data['settings'].items()] + ['']
     for key, caption in FIGURES:
         if key in figures:
             lines += [f'## {caption}', '', f'![{caption}]({figures[key]})', '']
@@ -297,12 +312,18 @@ def _markdown(folder: Path, data: dict[str, Any], figures: dict[str, str]) -> st
     lines += ['## Bank difficulty', '',
               'Success on the training bank and the held-out bank, each with its CI over '
               'scenarios: the random policy, the image-only servo (`nav_eval.evaluation.policies.'
-              'ServoPolicy`) and the trained models.', '']
+              'ServoPolicy`), the privileged oracle (`OraclePolicy`: a plan on the true map '
+              'driven with the same three actions, the decision period and the step limit; the '
+              'share of scenarios the actions can solve at all) and the trained models.', '']
     rows = [[r['config'], r['policy'], f"{r['episodes']['train']} + {r['episodes']['heldout']}",
              _ci(r['train']), _ci(r['heldout'])] for r in data['banks']]
     lines += table(['Configuration', 'Policy', 'Episodes', 'Training bank', 'Held-out bank'],
                    rows)
     lines += [f"Verdict: {data['bank_verdict']}.", '']
+    for config, gap in data.get('oracle_gap', {}).items():
+        lines += [f"Gap to the oracle, `{config}`: held-out success IQM {pct(gap['iqm'])} "
+                  f"against the oracle's {pct(gap['oracle'])}: {100 * gap['gap']:.0f} points.",
+                  '']
     if data['failed']:
         lines += ['## Failed trials', '']
         for name, error in sorted(data['failed'].items()):
@@ -402,6 +423,7 @@ def write_sweep_report(folder: Path) -> Path:
         'failed': _read_json(folder / FAILED_FILE) or {},
         'settings': {c: m[0]['settings'] for c, m in groups.items()},
         'anatomy': anatomy_rows(groups), 'calibration': calibration_rows(groups)}
+    data['oracle_gap'] = oracle_gaps(banks, data['aggregates'])
     curves = curve_scores(groups)
     success = {c: stats.score_matrix([t['final']['heldout']['summary']['success_rate']
                                       for t in m if 'heldout' in t['final']])

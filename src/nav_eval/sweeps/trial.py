@@ -27,6 +27,7 @@ from pathlib import Path
 from typing import Any
 
 from nav_eval.errors import TrialFailedError
+from nav_eval.evaluation.sets import BASELINE_POLICIES, SPLITS
 from nav_eval.seeds import seed_text
 from nav_gym.run_dir import (
     CONFIG,
@@ -179,7 +180,7 @@ def train_and_evaluate(trial: dict[str, Any]) -> int:
 def baseline_command(trial: dict[str, Any]) -> list[str] | None:
     """Return the baseline stage of a configuration, or None when its results exist."""
     out = Path(trial['out'])
-    names = [f'{p}_{s}' for p in ('random', 'servo') for s in ('train', 'heldout')]
+    names = [f'{p}_{s}' for p in BASELINE_POLICIES for s in SPLITS]
     seeds = {n: trial['train_seeds'] if n.endswith('_train') else trial['heldout_seeds']
              for n in names}
     if has_sets(out, names, seeds):

@@ -20,6 +20,7 @@ from typing import Any
 
 from ray import tune
 
+from nav_eval.evaluation.sets import BASELINE_POLICIES
 from nav_eval.sweeps.spec import TUNE
 from nav_eval.sweeps.trial import log_tail, run_trial
 
@@ -119,10 +120,9 @@ class ProgressLines(tune.Callback):
             self.remaining[kind] -= 1
         r = self.results.get(name, {})
         if kind == 'baseline':
-            figures = (f"random {_percent(r.get('random_train_success'))} / "
-                       f"{_percent(r.get('random_heldout_success'))}, servo "
-                       f"{_percent(r.get('servo_train_success'))} / "
-                       f"{_percent(r.get('servo_heldout_success'))} (training / held-out)")
+            figures = ', '.join(f"{policy} {_percent(r.get(f'{policy}_train_success'))} / "
+                                f"{_percent(r.get(f'{policy}_heldout_success'))}"
+                                for policy in BASELINE_POLICIES) + ' (training / held-out)'
         else:
             figures = (f"held-out success {_percent(r.get('heldout_success'))} (collisions "
                        f"{_percent(r.get('heldout_collision'))}), training "
