@@ -40,6 +40,7 @@ bench: setup
 	$(PY) benchmarks/bench_sim.py
 	$(PY) benchmarks/bench_env.py
 	$(PY) benchmarks/bench_live.py
+	$(PY) benchmarks/bench_learner.py
 
 lint: setup
 	$(VENV)/bin/ruff check src test benchmarks

@@ -32,6 +32,7 @@ os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 
 import numpy as np  # noqa: E402
 
+from nav_gym.actions import action_twists  # noqa: E402
 from nav_gym.config import EnvConfig  # noqa: E402
 from nav_gym.env import NavigationEnv, reward_terms  # noqa: E402
 from nav_gym.observation import rgb_to_observation  # noqa: E402
@@ -47,9 +48,8 @@ def actions(n: int) -> np.ndarray:
 def in_process(steps: int, config: EnvConfig) -> float:
     """Return steps/s of the env's work without ROS (NavSim, observation, reward, resets)."""
     sim = NavSim()
-    speeds = {0: (config.turn_speed, config.turn_rate), 1: (config.forward_speed, 0.0),
-              2: (config.turn_speed, -config.turn_rate)}  # as NavigationEnv maps its actions
-    commands = {a: twist_to_wheels(*v, sim.config) for a, v in speeds.items()}
+    commands = {a: twist_to_wheels(*v, sim.config)
+                for a, v in enumerate(action_twists(config))}  # NavigationEnv's actions
     seed = 0
     try:
         start = time.perf_counter()

@@ -1,0 +1,210 @@
+"""The learner's cost: the default (or a given) learner against SB3's vanilla DQN, side by side.
+
+    .venv/bin/python benchmarks/bench_learner.py [--set KEY=V ...] [--gradient-steps 200]
+        [--rounds 5] [--train-steps 6000] [--train-repeats 1] [--threads N]
+
+1. **The gradient step alone** (no ROS): both learners on an env with only the observation and
+   action spaces, their replay buffers filled by ``learning_starts`` steps, then rounds of
+   ``--gradient-steps`` gradient steps each, alternating (A B A B ...): the median time per
+   gradient step and the ratio.  Then one profiled round each says where a gradient step's time
+   goes: replay sampling, the augmentation, the forward passes, the backward pass, gradient
+   clipping, the optimiser, the rest (cProfile's cumulative times of those calls; profiling
+   slows the small calls, so these are shares, not timings).
+2. **Whole trainings** (``--train-steps`` > 0): ``nav-gym-train`` with each learner through the
+   ROS env and its own sim, alternating for ``--train-repeats`` rounds: training wall-clock,
+   steps/s, the env's share, and the per-env-step time budget of its summary.json
+   (``transport``: the sim's period and the round trip; ``gradient_step`` and ``predict``: the
+   learner).  ``--train-steps 50000`` is the main job's length (the learner issue's cost target:
+   the final learner trains 50k steps no slower than vanilla DQN).
+
+``--set KEY=V`` chooses the learner against vanilla DQN (e.g. ``--set augment_shift=4``); the
+default is today's default learner.  ``--threads`` is torch's thread count (default: what
+training uses, all cores).
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import dataclasses
+import json
+import os
+import pstats
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault('OMP_WAIT_POLICY', 'PASSIVE')  # as training sets it (before torch)
+os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
+
+import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from nav_gym import train_config  # noqa: E402
+from nav_gym.learner import learner_class, learner_kwargs, learner_policy  # noqa: E402
+from nav_gym.observation import OBS_SHAPE  # noqa: E402
+from nav_gym.run_dir import SUMMARY  # noqa: E402
+
+#: where a gradient step's time goes: a name -> the calls whose cumulative time it is
+PHASES = {'sampling': ('buffers.py', 'sample'),
+          'augmentation': ('learner.py', 'random_shift'),
+          'forward passes': ('module.py', '_call_impl'),
+          'backward pass': ('_tensor.py', 'backward'),
+          'gradient clipping': ('clip_grad.py', 'clip_grad_norm_'),
+          'optimiser': ('optimizer.py', 'wrapper')}
+
+
+class SpacesOnly(gym.Env):
+    """The env's observation and action spaces with random images: the learner's work only."""
+
+    observation_space = gym.spaces.Box(0, 255, OBS_SHAPE, np.uint8)
+    action_space = gym.spaces.Discrete(3)
+
+    def __init__(self) -> None:
+        """Draw images from a seeded generator; episodes last 100 steps."""
+        self.rng, self.t = np.random.default_rng(0), 0
+
+    def reset(self, *, seed: int | None = None, options: Any = None) -> tuple[np.ndarray, dict]:
+        """Start an episode."""
+        super().reset(seed=seed)
+        self.t = 0
+        return self.rng.integers(0, 256, OBS_SHAPE, dtype=np.uint8), {}
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
+        """Return a random image; end the episode after 100 steps."""
+        self.t += 1
+        return (self.rng.integers(0, 256, OBS_SHAPE, dtype=np.uint8), 0.0, False,
+                self.t >= 100, {})
+
+
+def build(config: train_config.TrainConfig) -> Any:
+    """Build the config's learner on the spaces-only env and fill its replay buffer."""
+    learner = config.learner()
+    model = learner_class(None, learner)(
+        learner_policy(learner), SpacesOnly(),
+        **{**config.dqn_kwargs(), 'buffer_size': 10_000, 'device': 'cpu'},
+        **learner_kwargs(learner, config.gamma))
+    model.learn(config.learning_starts + 1)
+    return model
+
+
+def time_steps(model: Any, steps: int, batch_size: int) -> float:
+    """Return the wall-clock ms per gradient step of ``steps`` gradient steps."""
+    start = time.perf_counter()
+    model.train(steps, batch_size)
+    return (time.perf_counter() - start) / steps * 1e3
+
+
+def breakdown(model: Any, steps: int, batch_size: int) -> dict[str, float]:
+    """Return each phase's share of a profiled round of gradient steps."""
+    profile = cProfile.Profile()
+    profile.runcall(model.train, steps, batch_size)
+    stats = pstats.Stats(profile).stats
+    total = max((s[3] for (f, _, name), s in stats.items() if name == 'train'
+                 and f.endswith(('dqn.py', 'learner.py'))), default=0.0)
+    shares = {}
+    for phase, (file, function) in PHASES.items():
+        seconds = sum(s[3] for (f, _, name), s in stats.items()
+                      if name == function and f.endswith(file))
+        if phase == 'forward passes':  # the outermost module calls only (cumtime counts once)
+            seconds = max(seconds, 0.0)
+        shares[phase] = seconds / total if total else 0.0
+    shares['the rest'] = max(0.0, 1.0 - sum(shares.values()))
+    return shares
+
+
+def gradient_steps(configs: dict[str, Any], steps: int, rounds: int) -> None:
+    """Part 1: alternate rounds of gradient steps; print medians, the ratio and the breakdown."""
+    models = {name: build(config) for name, config in configs.items()}
+    times: dict[str, list[float]] = {name: [] for name in models}
+    for _ in range(rounds):
+        for name, model in models.items():
+            times[name].append(time_steps(model, steps, configs[name].batch_size))
+    names = list(models)
+    print(f'\n1. one gradient step (batch {configs[names[0]].batch_size}, '
+          f'{torch.get_num_threads()} torch threads, {rounds} alternating rounds of {steps})')
+    for name in names:
+        print(f'   {name}: median {statistics.median(times[name]):6.2f} ms '
+              f'(min {min(times[name]):.2f}, max {max(times[name]):.2f})')
+    ratios = [a / b for a, b in zip(times[names[1]], times[names[0]], strict=True)]
+    print(f'   ratio {names[1]} / {names[0]}: median {statistics.median(ratios):.3f} '
+          f'(min {min(ratios):.3f}, max {max(ratios):.3f})')
+    print('   where the time goes (profiled round, shares of the gradient step):')
+    shares = {name: breakdown(model, steps, configs[name].batch_size)
+              for name, model in models.items()}
+    print('   ' + f"{'phase':<20}" + ''.join(f'{n:>8}' for n in names))
+    for phase in [*PHASES, 'the rest']:
+        print('   ' + f'{phase:<20}' + ''.join(f'{shares[n][phase]:>8.1%}' for n in names))
+
+
+def train_once(settings: list[str], steps: int, folder: Path, name: str) -> dict[str, Any]:
+    """Run ``nav-gym-train`` for ``steps`` steps with ``--KEY V`` settings; return its summary."""
+    flags = [a for s in settings for a in ('--' + s.split('=')[0].replace('_', '-'),
+                                           s.split('=', 1)[1])]
+    command = [sys.executable, '-m', 'nav_gym.train', '--total-timesteps', str(steps),
+               '--runs-dir', str(folder), '--run-name', name, '--save-replay-buffer', 'false',
+               '--checkpoint-freq', str(steps), *flags]
+    subprocess.run(command, check=True, stdout=subprocess.DEVNULL, timeout=steps * 0.2 + 600)
+    return json.loads((folder / name / SUMMARY).read_text())
+
+
+def trainings(settings: dict[str, list[str]], steps: int, repeats: int) -> None:
+    """Part 2: whole trainings through the ROS env, alternating; print times and the budget."""
+    runs: dict[str, list[dict[str, Any]]] = {name: [] for name in settings}
+    with tempfile.TemporaryDirectory(prefix='bench_learner_') as tmp:
+        for round_ in range(repeats):
+            for index, (name, flags) in enumerate(settings.items()):
+                runs[name].append(train_once(flags, steps, Path(tmp), f'r{round_}_{index}'))
+    names = list(runs)
+    print(f'\n2. whole trainings of {steps:,} steps through the ROS env ({repeats} alternating '
+          'rounds; per env step, ms)')
+    for name in names:
+        walls = [r['wall_clock_s'] for r in runs[name]]
+        budget = runs[name][-1]['time_budget']['env_step']
+        phases = ', '.join(f"{k.removesuffix('_ms')} {v:.2f}" for k, v in budget.items()
+                           if k.endswith('_ms') and v)
+        print(f'   {name}: wall-clock median {statistics.median(walls):7.1f} s, '
+              f"{runs[name][-1]['steps_per_s']:.1f} steps/s, env share "
+              f"{runs[name][-1]['env_share']:.1%}; {phases}")
+    ratios = [a['wall_clock_s'] / b['wall_clock_s']
+              for a, b in zip(runs[names[1]], runs[names[0]], strict=True)]
+    print(f'   ratio {names[1]} / {names[0]} (wall-clock): median {statistics.median(ratios):.3f}'
+          f' (min {min(ratios):.3f}, max {max(ratios):.3f})')
+
+
+def main() -> None:
+    """Measure vanilla DQN and the chosen learner side by side."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--set', action='append', default=[], metavar='KEY=V',
+                        help='a learner setting of the compared learner (nav-gym-train --help)')
+    parser.add_argument('--gradient-steps', type=int, default=200)
+    parser.add_argument('--rounds', type=int, default=5)
+    parser.add_argument('--train-steps', type=int, default=6000, help='0: skip part 2')
+    parser.add_argument('--train-repeats', type=int, default=1)
+    parser.add_argument('--threads', type=int, default=0, help='torch threads (0: default)')
+    args = parser.parse_args()
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    learner_keys = {f.name for f in dataclasses.fields(train_config.LearnerSpec)}
+    common = [s for s in args.set if s.split('=')[0] not in learner_keys]  # both learners'
+    flags = {'vanilla DQN (SB3)': [*common, 'double_q=false'], 'chosen': args.set}
+    configs = {name: train_config.build(None, dict(s.split('=', 1) for s in settings))
+               for name, settings in flags.items()}
+    assert configs['vanilla DQN (SB3)'].learner().vanilla
+    print(f"A: vanilla DQN (SB3)\nB: {configs['chosen'].learner().describe()}")
+    configs = {'A': configs['vanilla DQN (SB3)'], 'B': configs['chosen']}
+    flags = {'A': flags['vanilla DQN (SB3)'], 'B': flags['chosen']}
+    gradient_steps(configs, args.gradient_steps, args.rounds)
+    if args.train_steps:
+        trainings(flags, args.train_steps, args.train_repeats)
+
+
+if __name__ == '__main__':
+    main()
