@@ -76,3 +76,37 @@ def test_a_set_is_read_from_its_traces(tmp_path):
 def test_frames_that_do_not_match_the_decisions_are_refused():
     with pytest.raises(ValueError, match='3 observations for 3 decisions'):
         anatomy.episode_anatomy(trace(5, 'timeout', [L, F, R]), frames_with_goal([True] * 3))
+
+
+def test_a_collision_says_where_the_robot_touched_and_whether_it_could_see_it():
+    import math
+
+    arena = {'half_size': 1.0, 'robot_radius': 0.037,
+             'shapes': [{'name': 'obstacle_0', 'kind': 'cylinder', 'half_x': 0.08,
+                         'half_y': 0.08}]}
+    scenario = {'obstacles': [{'slot': 0, 'x': 0.3, 'y': 0.0, 'yaw': 0.0}]}
+
+    def collided(yaw: float) -> dict:  # touching the cylinder's left side, facing yaw
+        return {'seed': 1, 'outcome': 'collision', 'scenario': scenario,
+                'steps': [{'action': 1, 'pose': [0.3 - 0.08 - 0.037, 0.0, yaw]}]}
+
+    ahead = anatomy.hit_bearing(collided(0.0), arena)
+    assert ahead == pytest.approx(0.0, abs=math.radians(1.5))  # straight ahead
+    side = anatomy.hit_bearing(collided(math.pi / 2), arena)
+    assert side == pytest.approx(-math.pi / 2, abs=math.radians(1.5))  # on its right
+    wall = {'seed': 2, 'outcome': 'collision', 'scenario': {'obstacles': []},
+            'steps': [{'action': 0, 'pose': [-1.0 + 0.037, 0.5, 0.0]}]}  # backed into a wall
+    assert abs(anatomy.hit_bearing(wall, arena)) == pytest.approx(math.pi, abs=0.03)
+    assert anatomy.hit_bearing({**collided(0.0), 'outcome': 'timeout'}, arena) is None
+
+
+def test_collisions_out_of_view_are_counted_per_outcome():
+    def episode(outcome: str, out_of_view: bool | None) -> anatomy.EpisodeAnatomy:
+        return anatomy.EpisodeAnatomy(1, outcome, 10, 2, 5, 3, 1, None, out_of_view)
+
+    summary = anatomy.summarise([episode('collision', True), episode('collision', False),
+                                 episode('collision', True), episode('timeout', None)])
+    assert summary['collision']['hit_out_of_view'] == 2
+    assert summary['timeout']['hit_out_of_view'] is None
+    unknown = anatomy.summarise([episode('collision', None)])  # no arena: not known
+    assert unknown['collision']['hit_out_of_view'] is None

@@ -17,6 +17,8 @@ actions) and ``seed_<n>_frames.npz`` (the observation before each decision, then
 
 from __future__ import annotations
 
+import dataclasses
+import math
 import statistics
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -29,8 +31,10 @@ from nav_eval.analysis.failure_layers import goal_mask
 from nav_eval.analysis.metrics import OUTCOMES
 from nav_gym.actions import ACTION_NAMES
 from nav_gym.run_dir import frames_path
+from nav_sim.scenarios import ArenaGeometry, Layout, ObstacleShape, Placement, clearance
 
 MIN_PIXELS = 10  # fewer green pixels than this is noise at the image edge, not the goal
+HIT_DIRECTIONS = 360  # points on the robot's rim tried for where a collision touched
 LEFT, FORWARD, RIGHT = ACTION_NAMES.index('left'), ACTION_NAMES.index('forward'), \
     ACTION_NAMES.index('right')
 
@@ -46,6 +50,8 @@ class EpisodeAnatomy:
     in_view: int  # decisions taken with the goal in view
     forward_in_view: int  # of those, forward
     reversals: int  # left -> right or right -> left between consecutive decisions
+    hit_bearing: float | None = None  # a collision: where the robot touched, from its heading
+    hit_out_of_view: bool | None = None  # ... outside the camera's horizontal field of view
 
 
 def in_view(frames: np.ndarray) -> np.ndarray:
@@ -74,20 +80,53 @@ def episode_anatomy(trace: dict[str, Any], frames: np.ndarray) -> EpisodeAnatomy
                       if {a, b} == {LEFT, RIGHT}))
 
 
-def traces_anatomy(traces: Iterable[tuple[Path, dict[str, Any]]]) -> list[EpisodeAnatomy]:
+def hit_bearing(trace: dict[str, Any], arena: dict[str, Any]) -> float | None:
+    """Return where a collision episode's robot touched, relative to its heading (rad, + left).
+
+    From the final pose and the scenario's true geometry (privileged, as evaluation records
+    it): of ``HIT_DIRECTIONS`` points on the robot's rim, the one closest to a wall or an
+    obstacle (``nav_sim.scenarios.clearance``).  None for other outcomes.  ``arena`` is an
+    evaluation's ``results.json`` arena (half size, robot radius, the slots' shapes).
+    """
+    if trace['outcome'] != 'collision' or not trace['steps']:
+        return None
+    x, y, yaw = (float(v) for v in trace['steps'][-1]['pose'][:3])
+    geometry = ArenaGeometry(float(arena['half_size']), float(arena['robot_radius']), tuple(
+        ObstacleShape(s['name'], s['kind'], float(s['half_x']), float(s['half_y']))
+        for s in arena['shapes']))
+    layout = Layout('', 0, tuple(Placement(int(o['slot']), float(o['x']), float(o['y']),
+                                           float(o.get('yaw', 0.0)))
+                                 for o in trace['scenario'].get('obstacles', [])))
+    angles = yaw + np.linspace(-math.pi, math.pi, HIT_DIRECTIONS, endpoint=False)
+    rim = geometry.robot_radius
+    gaps = [clearance(x + rim * math.cos(a), y + rim * math.sin(a), layout, geometry)
+            for a in angles]
+    return math.remainder(float(angles[int(np.argmin(gaps))]) - yaw, 2 * math.pi)
+
+
+def traces_anatomy(traces: Iterable[tuple[Path, dict[str, Any]]],
+                   arena: dict[str, Any] | None = None,
+                   half_fov: float | None = None) -> list[EpisodeAnatomy]:
     """Describe episodes from their ``(path, trace)`` pairs (:func:`nav_gym.run_dir.read_traces`).
 
     The frames are read beside each trace; an episode whose frames are missing or unreadable,
-    or disagree with its trace, is left out.
+    or disagree with its trace, is left out.  With the evaluation's ``arena`` and the camera's
+    horizontal half field of view ``half_fov`` (rad), a collision also says where the robot
+    touched and whether that was out of view (:func:`hit_bearing`).
     """
     out = []
     for path, trace in traces:
         try:
             with np.load(frames_path(path)) as data:
                 frames = data['obs']
-            out.append(episode_anatomy(trace, frames))
-        except (OSError, ValueError, KeyError):
+            episode = episode_anatomy(trace, frames)
+            bearing = hit_bearing(trace, arena) if arena else None
+        except (OSError, ValueError, KeyError, TypeError):
             continue
+        if bearing is not None and half_fov is not None:
+            episode = dataclasses.replace(episode, hit_bearing=bearing,
+                                          hit_out_of_view=abs(bearing) > half_fov)
+        out.append(episode)
     return sorted(out, key=lambda e: e.seed)
 
 
@@ -97,7 +136,9 @@ def summarise(episodes: Iterable[EpisodeAnatomy]) -> dict[str, dict[str, Any]]:
     Per outcome: ``episodes``; ``median_first_in_view`` (decisions before the goal was first in
     view, over the episodes that saw it) and ``never_in_view``; ``in_view_share`` (of all
     decisions); ``forward_in_view`` (forward decisions among those with the goal in view);
-    ``reversals_per_100`` (left/right reversals per 100 decisions).
+    ``reversals_per_100`` (left/right reversals per 100 decisions); for collisions, with
+    where each touched known, ``hit_out_of_view`` (how many touched outside the camera's
+    horizontal field of view; None otherwise).
     """
     by_outcome: dict[str, list[EpisodeAnatomy]] = {}
     for e in episodes:
@@ -116,6 +157,9 @@ def summarise(episodes: Iterable[EpisodeAnatomy]) -> dict[str, dict[str, Any]]:
             'in_view_share': seen / decisions if decisions else None,
             'forward_in_view': sum(e.forward_in_view for e in group) / seen if seen else None,
             'reversals_per_100': 100 * sum(e.reversals for e in group) / decisions
-            if decisions else None}
+            if decisions else None,
+            'hit_out_of_view': (sum(e.hit_out_of_view for e in group)
+                                if all(e.hit_out_of_view is not None for e in group)
+                                and outcome == 'collision' else None)}
     return out
 

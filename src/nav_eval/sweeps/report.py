@@ -13,6 +13,7 @@ identical files (fixed bootstrap seed, PNGs without a software/date stamp).
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Any
 
@@ -45,6 +46,7 @@ from nav_gym.run_dir import (
     read_traces,
 )
 from nav_gym.train_config import TrainConfig, learner_of
+from nav_sim.config import SimConfig
 
 FINAL_SETS = {'train': 'dqn_train', 'heldout': 'dqn_heldout'}
 BOOKKEEPING = ('seed', 'run_name', 'runs_dir', 'device', 'namespace', 'sim', 'sim_timeout',
@@ -95,12 +97,18 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
               if heldout else [])
     key = {k: v for k, v in vars(config).items() if k not in BOOKKEEPING}
     return {'name': run_dir.name, 'run_dir': run_dir, 'seed': config.seed, 'settings': key,
-            'final': final, 'curve': curve, 'anatomy': anatomy.traces_anatomy(traces),
+            'final': final, 'curve': curve,
+            'anatomy': anatomy.traces_anatomy(traces, results.get('arena'), half_fov(config)),
             'values': calibration.traces_values(traces, config),
             'curve_values': curve_values,
             'finished': (run_dir / FINAL_MODEL).is_file(),
             'wall_clock_s': summary.get('wall_clock_total_s'),
             'steps': summary.get('num_timesteps')}
+
+
+def half_fov(config: TrainConfig) -> float:
+    """Return the camera's horizontal half field of view (rad) of a run's sim settings."""
+    return math.radians(SimConfig.from_params(config.sim_params).camera_hfov_deg) / 2.0
 
 
 def group_trials(trials: list[dict[str, Any]], names: dict[str, str]) -> dict[str, list[dict]]:
@@ -343,17 +351,20 @@ def _anatomy_markdown(rows: list[dict[str, Any]]) -> list[str]:
               '*reaching* it (the share of decisions taken with the goal in view, how many of '
               'those drove forward, left/right reversals per 100 decisions). A time-out that '
               'saw the goal late failed to search; one that saw it most of the time and '
-              'reversed failed to approach (`nav_eval.analysis.anatomy`).', '']
+              'reversed failed to approach. *Hits out of view*: of the collisions, how many '
+              "touched a wall or an obstacle outside the camera's horizontal field of view "
+              '(from the final pose and the true map; `nav_eval.analysis.anatomy`).', '']
 
     def number(value: Any, digits: int = 0) -> str:
         return '–' if value is None else f'{value:.{digits}f}'
 
     body = [[r['config'], r['seed'], r['outcome'], r['episodes'],
              number(r['median_first_in_view'], 1), r['never_in_view'], pct(r['in_view_share']),
-             pct(r['forward_in_view']), number(r['reversals_per_100'])] for r in rows]
+             pct(r['forward_in_view']), number(r['reversals_per_100']),
+             number(r.get('hit_out_of_view'))] for r in rows]
     lines += table(['Configuration', 'Seed', 'Outcome', 'Episodes', 'Decisions before in view '
                     '(median)', 'Never in view', 'Goal in view', 'Forward when in view',
-                    'Reversals / 100'], body)
+                    'Reversals / 100', 'Hits out of view'], body)
     return lines
 
 
