@@ -15,7 +15,7 @@ from typing import Any
 
 import yaml
 
-from nav_gym.config import EnvConfig
+from nav_gym.config import EnvConfig, world_episode_steps
 from nav_gym.errors import TrainConfigError
 from nav_sim.config import SimConfig, convert, setting
 from nav_sim.errors import ConfigError
@@ -137,8 +137,7 @@ class TrainConfig:
     runs_dir: str = setting('runs', 'directory that holds one sub-directory per run')
     run_name: str = setting('', "run directory name ('' = dqn_<date>_<time>)")
     split: str = setting('train', 'scenario bank used for training')
-    max_episode_steps: int = setting(EnvConfig.max_episode_steps, 'control periods before an '
-                                     'episode is truncated')
+    max_episode_steps: int = _env('max_episode_steps')
     namespace: str = setting('', 'ROS namespace of the sim node')
     sim: str = setting('auto', "'auto', 'attach' or 'embedded' (see EnvConfig)")
     sim_timeout: float = setting(5.0, 'seconds to wait for the sim before failing')
@@ -171,6 +170,11 @@ class TrainConfig:
             object.__setattr__(self, 'sim_params', {})
         if not isinstance(self.sim_params, dict):
             raise TrainConfigError(f'sim_params must be a mapping, got {self.sim_params!r}')
+        if self.max_episode_steps == 0:  # the world's limit
+            object.__setattr__(self, 'max_episode_steps',
+                               world_episode_steps(self.sim_params))
+        if self.max_episode_steps < 1:
+            raise TrainConfigError("max_episode_steps must be >= 1 (0: the world's limit)")
 
     def env_config(self, **overrides: Any) -> EnvConfig:
         """Return the run's whole EnvConfig (actions, episode limit, reward weights, sim)."""

@@ -99,9 +99,14 @@ def _recorded(recorder: Any, stamp_ns: int, timeout: float = 5.0) -> None:
 
 
 def arena_description(sim_params: dict[str, Any]) -> dict[str, Any]:
-    """Arena geometry for top-down plots (loads the MJCF; renders nothing)."""
+    """Arena geometry for top-down plots (loads the MJCF; renders nothing).
+
+    ``walls`` are the interior walls (centre x, y and half extents), e.g. between rooms.
+    """
     geometry, config = load_arena(sim_params)
-    return {'half_size': geometry.half_size, 'robot_radius': geometry.robot_radius,
+    return {'world': config.world, 'half_size': geometry.half_size,
+            'robot_radius': geometry.robot_radius,
+            'walls': [[w[0], w[1], w[3], w[4]] for w in geometry.interior_walls],
             'goal_radius': config.goal_radius, 'goal_marker_radius': config.goal_marker_radius,
             'shapes': [{'name': s.name, 'kind': s.kind, 'half_x': s.half_x, 'half_y': s.half_y}
                        for s in geometry.shapes]}
