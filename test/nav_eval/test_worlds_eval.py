@@ -6,6 +6,7 @@ evaluation of a run whose world is gone is one line.
 
 from __future__ import annotations
 
+import json
 import subprocess
 from pathlib import Path
 
@@ -81,3 +82,42 @@ def test_evaluating_a_run_whose_world_is_gone_is_one_line(tmp_path):
     assert result.stderr.splitlines() == [
         f'nav-eval-evaluate: error: world file {gone} not found: give an existing MJCF file, or '
         'the name of a shipped world (arena.xml, clutter.xml, rooms.xml)']
+
+
+def test_a_run_plays_in_another_world_with_that_worlds_settings():
+    arena = TrainConfig().with_full_sim_params()
+    rooms = arena.in_world({'world': 'rooms.xml'})
+    assert (rooms.max_episode_steps, rooms.sim_params['num_obstacles'],
+            rooms.sim_params['min_start_goal_distance']) == (200, 4, 1.0)
+    back = rooms.in_world({'world': 'arena.xml'})
+    assert back.sim_params == arena.sim_params and back.max_episode_steps == 100
+    mine = arena.in_world({'world': 'clutter.xml', 'num_obstacles': 2, 'randomize_look': True})
+    assert (mine.sim_params['num_obstacles'], mine.sim_params['obstacle_gap'],
+            mine.sim_params['randomize_look'], mine.max_episode_steps) == (2, 0.1, True, 120)
+    looks = arena.in_world({'randomize_look': True})  # the same world: only the look changes
+    assert looks.max_episode_steps == 100
+    assert {k: v for k, v in looks.sim_params.items() if k != 'randomize_look'} == {
+        k: v for k, v in arena.sim_params.items() if k != 'randomize_look'}
+
+
+def test_evaluate_plays_a_run_in_another_world_and_look_into_another_folder(tmp_path):
+    from nav_eval.evaluation.runner import evaluate
+    from nav_eval.evaluation.sets import plan_sets
+    run = tmp_path / 'run'
+    run.mkdir()
+    (run / 'config.yaml').write_text(TrainConfig(max_episode_steps=15).with_full_sim_params()
+                                     .to_yaml())
+    out = tmp_path / 'rooms'
+    sets = plan_sets(run, ['random_train'], (101, 102), (201,))
+    results = evaluate(run, sets, out, record=False,
+                       sim_params={'world': 'rooms.xml', 'randomize_look': True})
+    assert results['config']['sim_params']['world'] == 'rooms.xml'
+    assert results['config']['max_episode_steps'] == 200 and len(results['arena']['walls']) == 6
+    trace = json.loads((out / 'traces' / 'random_train' / 'seed_101.json').read_text())
+    assert len(trace['scenario']['obstacles']) == 4 and 'look' in trace['scenario']
+    evaluate_command = Path(get_package_prefix('nav_eval')) / 'lib' / 'nav_eval' / 'evaluate'
+    refused = subprocess.run([str(evaluate_command), str(run), '--sets', 'random_train',
+                              '--sim-params', '{world: rooms.xml}'], capture_output=True,
+                             text=True, timeout=180)
+    assert refused.returncode == 1 and 'write it with --out' in refused.stderr
+    assert not (run / 'eval').exists()

@@ -24,6 +24,7 @@ from nav_eval.evaluation.policies import DQNPolicy, ExploringDQNPolicy, Policy, 
 from nav_eval.evaluation.sets import EvalSet, run_config
 from nav_eval.seeds import seed_range
 from nav_gym.env import NavigationEnv
+from nav_gym.errors import TrainConfigError
 from nav_gym.run_dir import (
     BAGS,
     EPISODES_CSV,
@@ -206,9 +207,19 @@ def env_for_run(config: TrainConfig, record: bool, sim: str = 'embedded') -> Nav
 
 
 def evaluate(run_dir: Path, sets: list[EvalSet], out: Path | None = None,
-             record: bool = True, *, live_port: int = 0) -> dict[str, Any]:
-    """Evaluate every set and write results.json / results.md / episodes.csv under ``out``."""
+             record: bool = True, *, live_port: int = 0,
+             sim_params: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Evaluate every set and write results.json / results.md / episodes.csv under ``out``.
+
+    ``sim_params`` plays the run's policies in another world or look
+    (``TrainConfig.in_world``); results.json's ``config`` says which.
+    """
     config = run_config(run_dir)
+    if sim_params:
+        try:
+            config = config.in_world(sim_params)
+        except TrainConfigError as exc:
+            raise EvaluationError(f'--sim-params: {exc}') from None
     out = out or run_dir / EVAL
     try:
         out.mkdir(parents=True, exist_ok=True)
