@@ -2,6 +2,7 @@
 
     ros2 run nav_eval evaluate RUN_DIR [--sets ...] [--train-seeds 101-110]
                                        [--heldout-seeds 201-210] [--no-record] [--video]
+                                       [--sim-params '{world: rooms.xml}' --out DIR]
 
 Default sets, all on the same scenarios per split: the random policy on the training seeds
 (baseline), the final DQN on the training seeds and on the held-out seeds, and the early
@@ -14,7 +15,8 @@ per set; with ``--video``, MP4 videos of the report's representative episodes un
 
 A diagnosis, on request only: ``explore_train`` / ``explore_heldout`` play the final model with
 training's final epsilon (``ExploringDQNPolicy``), into another ``--out`` than ``RUN_DIR/eval``
-so that they never replace the evaluation.
+so that they never replace the evaluation.  So does ``--sim-params``: the run's policies in
+another world or look (transfer, unseen looks), written to another ``--out``.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.live_hooks import add_live_argument
 from nav_gym.run_dir import EVAL, FINAL_MODEL, VIDEOS
 from nav_gym.timing import quiet_learner_threads
+from nav_gym.train_config import coerce
 
 
 def print_videos(run_dir: Path) -> None:
@@ -61,6 +64,10 @@ def main(argv: list[str] | None = None) -> None:
                         'after step 0)')
     parser.add_argument('--out', type=Path, help='output directory (default RUN_DIR/eval)')
     parser.add_argument('--no-record', action='store_true', help='do not write MCAP bags')
+    parser.add_argument('--sim-params', help="play the run's policies in another world or "
+                        "look, into another --out: sim parameters over the run's, e.g. "
+                        "'{world: rooms.xml}' (the world brings its own settings and episode "
+                        "limit) or '{randomize_look: true}' (docs/worlds.md)")
     parser.add_argument('--video', action='store_true', help='also write MP4 videos of the '
                         "report's representative episodes to RUN_DIR/eval/videos/")
     add_live_argument(parser)
@@ -79,9 +86,15 @@ def main(argv: list[str] | None = None) -> None:
         if writes_eval and any(s.policy == 'explore' for s in sets):
             raise EvaluationError('the explore sets are a diagnosis, not the evaluation: write '
                                   'them elsewhere with --out (e.g. --out RUN_DIR/eval_explore)')
+        sim_params = (coerce({'sim_params': args.sim_params}, '--sim-params')['sim_params']
+                      if args.sim_params else None)
+        if sim_params and writes_eval:
+            raise EvaluationError("--sim-params plays the policy elsewhere, not the run's own "
+                                  'evaluation: write it with --out (e.g. --out '
+                                  'RUN_DIR/eval_rooms)')
         start = time.perf_counter()
         results = evaluate(args.run_dir, sets, args.out, record=not args.no_record,
-                           live_port=args.live)
+                           live_port=args.live, sim_params=sim_params)
         print(results_markdown(results['sets']))
         print(f'evaluated {sum(len(s.seeds) for s in sets)} episodes in '
               f'{time.perf_counter() - start:.1f} s; results in '

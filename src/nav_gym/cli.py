@@ -11,7 +11,10 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
+import yaml
+
 from nav_gym.config import SIM_MODES, EnvConfig
+from nav_gym.errors import TrainConfigError
 from nav_sim.errors import VisnavError
 
 
@@ -22,12 +25,22 @@ def add_env_arguments(parser: argparse.ArgumentParser) -> None:
                         help="attach to a running sim, start one ('embedded'), or 'auto'")
     parser.add_argument('--sim-timeout', type=float, default=5.0,
                         help='seconds to wait for the sim before failing')
+    parser.add_argument('--sim-params', default='{}',
+                        help="sim parameters for a sim the command starts, as JSON/YAML, e.g. "
+                        "'{world: rooms.xml}' (docs/worlds.md)")
 
 
 def env_config(args: argparse.Namespace, **extra: Any) -> EnvConfig:
     """Return the EnvConfig of the env options (and ``extra`` settings)."""
+    try:
+        sim_params = yaml.safe_load(args.sim_params)
+    except yaml.YAMLError:
+        sim_params = None
+    if not isinstance(sim_params, dict):
+        raise TrainConfigError(f"--sim-params takes a mapping, e.g. '{{world: rooms.xml}}', "
+                               f'got {args.sim_params!r}')
     return EnvConfig(namespace=args.namespace, sim=args.sim, sim_timeout=args.sim_timeout,
-                     **extra)
+                     sim_params=sim_params, **extra)
 
 
 def strip_ros_args(argv: Sequence[str] | None) -> list[str]:
@@ -52,8 +65,9 @@ def run_command(name: str, body: Callable[[], int]) -> None:
     """Run a command body: readable one-line errors, exit 130 on Ctrl-C, never a traceback."""
     try:
         code = body()
-    except VisnavError as exc:
-        print(f'{name}: error: {exc}', file=sys.stderr)
+    except VisnavError as exc:  # one line per problem (a world's violations: one each)
+        for line in str(exc).splitlines() or ['']:
+            print(f'{name}: error: {line}', file=sys.stderr)
         code = 1
     except KeyboardInterrupt:
         print(f'{name}: interrupted', file=sys.stderr)

@@ -4,11 +4,37 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from nav_gym.errors import TrainConfigError
-from nav_sim.config import setting
+from nav_sim.config import SimConfig, convert, setting
+from nav_sim.errors import ConfigError, WorldError
+from nav_sim.paths import find_world
+from nav_sim.world_file import SETTING_PREFIX, world_settings
 
 SIM_MODES = ('auto', 'attach', 'embedded')
+#: the episode limit of a world that sets none (arena.xml): 100 decisions x 0.512 s = 51 s
+DEFAULT_EPISODE_STEPS = 100
+
+
+def world_episode_steps(sim_params: dict[str, Any]) -> int:
+    """Return the episode limit of the world in ``sim_params`` (its ``max_episode_steps``).
+
+    ``DEFAULT_EPISODE_STEPS`` for a world that sets none; raises WorldNotFoundError, or
+    WorldError for a setting that is not a whole number >= 1.
+    """
+    world = str(sim_params.get('world', SimConfig.world))
+    value = world_settings(world).get('max_episode_steps')
+    if value is None:
+        return DEFAULT_EPISODE_STEPS
+    try:
+        steps = convert('max_episode_steps', int, value)
+    except ConfigError as exc:
+        raise WorldError(f'{find_world(world)}: setting {SETTING_PREFIX}{exc}') from None
+    if steps < 1:
+        raise WorldError(f'{find_world(world)}: setting {SETTING_PREFIX}max_episode_steps must '
+                         f'be >= 1, got {steps}')
+    return steps
 
 
 @dataclass(frozen=True)
@@ -25,8 +51,9 @@ class EnvConfig:
     sim_timeout: float = setting(5.0, 'seconds to wait for the sim before a clear error')
     split: str = setting('train', "scenario bank: 'train' or 'heldout' (reset options may "
                          'override)')
-    max_episode_steps: int = setting(100, 'control periods before an episode is truncated (100 x '
-                                     '0.512 s = 51 s)')
+    max_episode_steps: int = setting(0, "control periods before an episode is truncated; 0: the "
+                                     "world's limit (arena.xml: 100 x 0.512 s = 51 s; "
+                                     'docs/worlds.md)')
     forward_speed: float = setting(0.12, 'action 1 (forward): linear velocity in m/s')
     turn_rate: float = setting(0.75, 'actions 0/2 (left/right): angular velocity in rad/s')
     turn_speed: float = setting(0.03, 'actions 0/2: linear velocity while turning in m/s (0: '
@@ -43,8 +70,12 @@ class EnvConfig:
         """Refuse settings the env cannot work with (TrainConfigError)."""
         if self.sim not in SIM_MODES:
             raise TrainConfigError(f'sim must be one of {list(SIM_MODES)}, got {self.sim!r}')
+        if self.sim_params is None:
+            object.__setattr__(self, 'sim_params', {})
+        if self.max_episode_steps == 0:
+            object.__setattr__(self, 'max_episode_steps', world_episode_steps(self.sim_params))
         if int(self.max_episode_steps) < 1:
-            raise TrainConfigError('max_episode_steps must be >= 1')
+            raise TrainConfigError("max_episode_steps must be >= 1 (0: the world's limit)")
         for name in ('probe_timeout', 'sim_timeout', 'forward_speed', 'turn_rate'):
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -52,5 +83,3 @@ class EnvConfig:
         if not (math.isfinite(self.turn_speed) and self.turn_speed >= 0):
             raise TrainConfigError(f'turn_speed must be a finite number >= 0, got '
                                    f'{self.turn_speed!r}')
-        if self.sim_params is None:
-            object.__setattr__(self, 'sim_params', {})

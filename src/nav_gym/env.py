@@ -27,6 +27,7 @@ from nav_sim.config import normalise_split, validate_seed
 from nav_sim.errors import FrameSyncError, SimConflictError, SimUnavailableError
 from nav_sim.sim_process import SimProcess
 from nav_sim.step_timing import StepTiming
+from nav_sim.world import load_arena
 
 _instances = itertools.count()
 #: where an env step's time goes (on /diagnostics and in summary.json): waiting for the sim's
@@ -107,6 +108,7 @@ class NavigationEnv(gym.Env):
                     client = SimClient(namespace, timeout=cfg.sim_timeout,
                                        node_name=f'visnav_env_{os.getpid()}')
                 params = {'publish_clock': False, **cfg.sim_params}
+                load_arena(params)  # a bad world or setting: its one-line error, raised here
                 # never a second sim in a namespace: look for one as long as 'auto' does
                 looked = cfg.sim == 'auto' or not cfg.namespace  # or a fresh namespace
                 _refuse_occupied(client, client.find_sims(0.0 if looked else cfg.probe_timeout))

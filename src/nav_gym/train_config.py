@@ -15,11 +15,12 @@ from typing import Any
 
 import yaml
 
-from nav_gym.config import EnvConfig
+from nav_gym.config import EnvConfig, world_episode_steps
 from nav_gym.errors import TrainConfigError
 from nav_sim.config import SimConfig, convert, setting
 from nav_sim.errors import ConfigError
 from nav_sim.sim_process import typed_params
+from nav_sim.world_file import world_settings
 
 _ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
 #: the components' flags (LearnerSpec fields): each at its default is that component off
@@ -137,8 +138,7 @@ class TrainConfig:
     runs_dir: str = setting('runs', 'directory that holds one sub-directory per run')
     run_name: str = setting('', "run directory name ('' = dqn_<date>_<time>)")
     split: str = setting('train', 'scenario bank used for training')
-    max_episode_steps: int = setting(EnvConfig.max_episode_steps, 'control periods before an '
-                                     'episode is truncated')
+    max_episode_steps: int = _env('max_episode_steps')
     namespace: str = setting('', 'ROS namespace of the sim node')
     sim: str = setting('auto', "'auto', 'attach' or 'embedded' (see EnvConfig)")
     sim_timeout: float = setting(5.0, 'seconds to wait for the sim before failing')
@@ -171,6 +171,11 @@ class TrainConfig:
             object.__setattr__(self, 'sim_params', {})
         if not isinstance(self.sim_params, dict):
             raise TrainConfigError(f'sim_params must be a mapping, got {self.sim_params!r}')
+        if self.max_episode_steps == 0:  # the world's limit
+            object.__setattr__(self, 'max_episode_steps',
+                               world_episode_steps(self.sim_params))
+        if self.max_episode_steps < 1:
+            raise TrainConfigError("max_episode_steps must be >= 1 (0: the world's limit)")
 
     def env_config(self, **overrides: Any) -> EnvConfig:
         """Return the run's whole EnvConfig (actions, episode limit, reward weights, sim)."""
@@ -206,6 +211,27 @@ class TrainConfig:
         except ConfigError as exc:
             raise TrainConfigError(f'sim_params: {exc}') from exc
         return dataclasses.replace(self, sim_params={**params, **dataclasses.asdict(sim)})
+
+    def in_world(self, sim_params: dict[str, Any]) -> TrainConfig:
+        """Return this config with sim parameters replaced: a policy played elsewhere.
+
+        For an evaluation in another world or look (``nav-eval-evaluate --sim-params``).  A
+        new ``world`` brings its own settings: every setting the run's world or the new world
+        sets (``visnav:`` customs) takes the new world's value, else its default, and the
+        episode limit is the new world's; a value in ``sim_params`` wins.
+        """
+        try:
+            given = typed_params(sim_params)
+        except ConfigError as exc:
+            raise TrainConfigError(f'sim_params: {exc}') from exc
+        sim, steps = dict(self.sim_params), self.max_episode_steps
+        old, new = (str(p.get('world', SimConfig.world)) for p in (sim, {**sim, **given}))
+        if new != old:
+            worlds = set(world_settings(old)) | set(world_settings(new))
+            sim = {k: v for k, v in sim.items() if k not in worlds}
+            steps = 0  # the new world's limit
+        return dataclasses.replace(self, sim_params={**sim, **given},
+                                   max_episode_steps=steps).with_full_sim_params()
 
     def to_yaml(self) -> str:
         """Return the config as YAML (what a run saves as config.yaml)."""

@@ -12,7 +12,9 @@ import numbers
 from dataclasses import dataclass, field
 from typing import Any
 
-from nav_sim.errors import ConfigError, ScenarioError
+from nav_sim.errors import ConfigError, ScenarioError, WorldError
+from nav_sim.paths import find_world
+from nav_sim.world_file import ENV_SETTINGS, SETTING_PREFIX, world_settings
 
 SPLITS = ('train', 'heldout')
 SPLIT_ALIASES = {'train': 'train', 'training': 'train', 'heldout': 'heldout',
@@ -96,7 +98,8 @@ def setting(default: Any, help: str) -> Any:
 class SimConfig:
     """Parameters of the world, the robot, the camera and the task (no ROS)."""
 
-    world: str = setting('arena.xml', 'MJCF file: a path, or a name under share/nav_sim/worlds')
+    world: str = setting('arena.xml', 'MJCF world: a name under share/nav_sim/worlds (arena.xml, '
+                         'clutter.xml, rooms.xml) or a path (docs/worlds.md)')
     sim_dt: float = setting(0.032, 'physics timestep in seconds (Webots basicTimeStep default: '
                             '32 ms)')
     action_repeat: int = setting(16, 'physics steps per control period (ctrl_dt = sim_dt * '
@@ -125,10 +128,15 @@ class SimConfig:
                                         'beacon taller than the 16 cm obstacles)')
     min_start_goal_distance: float = setting(0.6, 'minimum straight-line start-goal distance (m)')
     num_obstacles: int = setting(3, 'obstacles per layout (at most the slots in the world)')
+    obstacle_gap: float = setting(0.15, 'free gap in metres between the placed obstacles and to '
+                                  'the walls (0.15: wider than the 7.4 cm robot)')
     train_layouts: int = setting(20, 'number of layouts in the training bank')
     heldout_layouts: int = setting(10, 'number of layouts in the held-out bank')
     train_bank_seed: int = setting(1_000, 'seed that generates the training layout bank')
     heldout_bank_seed: int = setting(2_000, 'seed that generates the held-out layout bank')
+    randomize_look: bool = setting(False, 'draw the colours of floor, walls and obstacles and '
+                                   "the light from each scenario's seed (training and held-out "
+                                   'palettes are disjoint; the goal keeps its green)')
 
     @property
     def ctrl_dt(self) -> float:
@@ -145,7 +153,7 @@ class SimConfig:
     def __post_init__(self) -> None:
         """Refuse values the simulation cannot run with (ConfigError)."""
         positive = ('sim_dt', 'wheel_radius', 'axle_length', 'max_wheel_speed', 'goal_radius',
-                    'camera_near_clip', 'camera_mount_height',
+                    'camera_near_clip', 'camera_mount_height', 'obstacle_gap',
                     'goal_marker_radius', 'goal_marker_height', 'min_start_goal_distance')
         for name in positive:
             value = getattr(self, name)
@@ -172,13 +180,40 @@ class SimConfig:
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> SimConfig:
-        """Build from a mapping, rejecting unknown keys with the list of known ones."""
+        """Build from a mapping, rejecting unknown keys with the list of known ones.
+
+        A parameter the mapping leaves out takes its world's setting, if the world has one
+        (:meth:`world_defaults`), else its default.
+        """
         known = {f.name: f for f in dataclasses.fields(cls)}
         unknown = sorted(set(values) - set(known))
         if unknown:
             raise ConfigError(f'unknown simulation parameter(s) {unknown}; known: {sorted(known)}')
-        return cls(**{key: convert(key, type(known[key].default), value)
-                      for key, value in values.items()})
+        given = {key: convert(key, type(known[key].default), value)
+                 for key, value in values.items()}
+        return cls(**{**cls.world_defaults(given.get('world', cls.world)), **given})
+
+    @classmethod
+    def world_defaults(cls, world: str) -> dict[str, Any]:
+        """Return the sim parameters a world sets (its ``visnav:`` settings), typed.
+
+        Raises WorldNotFoundError, or WorldError for a setting that is neither a sim parameter
+        nor one of ``nav_sim.world_file.ENV_SETTINGS`` or that has the wrong type.
+        """
+        known = {f.name: f for f in dataclasses.fields(cls) if f.name != 'world'}
+        out = {}
+        for name, value in world_settings(world).items():
+            if name in ENV_SETTINGS:
+                continue
+            if name not in known:
+                raise WorldError(f'{find_world(world)}: unknown setting "{SETTING_PREFIX}{name}"; '
+                                 f'a world sets sim parameters {sorted(known)} or '
+                                 f'{list(ENV_SETTINGS)}')
+            try:
+                out[name] = convert(name, type(known[name].default), value)
+            except ConfigError as exc:
+                raise WorldError(f'{find_world(world)}: setting {SETTING_PREFIX}{exc}') from None
+        return out
 
     @classmethod
     def from_params(cls, params: dict[str, Any]) -> SimConfig:

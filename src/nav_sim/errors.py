@@ -40,3 +40,10 @@ class SimConflictError(NavSimError, RuntimeError):
 
     Two sims in one namespace mix their worlds: observations and rewards come from both.
     """
+
+
+class WorldError(NavSimError, ValueError):
+    """A world file cannot be read, or breaks the world contract (docs/worlds.md).
+
+    The message has one line per problem, each naming the file and the element.
+    """

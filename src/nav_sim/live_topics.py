@@ -278,26 +278,37 @@ def _marker(stamp_ns: int, ns: str, marker_id: int, shape: str, *,
         mesh_resource='', mesh_file=_NO_MESH, mesh_use_embedded_materials=False)
 
 
+def look_colours(scenario: dict[str, Any]) -> dict[str, tuple[float, float, float, float]]:
+    """Return the floor, wall and obstacle colours of an episode: its drawn look's, else plain."""
+    look = scenario.get('look') or {}
+    plain = {'floor': FLOOR, 'walls': WALL, 'obstacles': OBSTACLE}
+    return {k: ((*(float(v) for v in look[k][:3]), 1.0) if k in look else colour)
+            for k, colour in plain.items()}
+
+
 def scene_markers(arena: ArenaScene, scenario: dict[str, Any], stamp_ns: int) -> Any:
     """Build the static world of an episode: floor, walls, obstacles, goal.
 
     ``scenario`` is the episode description, ``Scenario.to_dict()``, which is also what the
-    sim's ``reset`` service returns.
+    sim's ``reset`` service returns; a drawn look in it (``look``) colours the floor, walls and
+    obstacles.
     """
+    colours = look_colours(scenario)
     markers = [_marker(stamp_ns, '', 0, 'cube', action=3)]  # DELETEALL: the previous episode's
     size = 2.0 * arena.half_size
     markers.append(_marker(stamp_ns, 'floor', 0, 'cube', position=(0.0, 0.0, -0.005),
-                           scale=(size, size, 0.01), color=FLOOR))
+                           scale=(size, size, 0.01), color=colours['floor']))
     for i, w in enumerate(arena.walls):
         markers.append(_marker(stamp_ns, 'walls', i, 'cube', position=(w.x, w.y, w.z),
-                               scale=(2 * w.half_x, 2 * w.half_y, 2 * w.half_z), color=WALL))
+                               scale=(2 * w.half_x, 2 * w.half_y, 2 * w.half_z),
+                               color=colours['walls']))
     for i, place in enumerate(scenario.get('obstacles', ())):
         shape = arena.slots[int(place['slot'])]
         markers.append(_marker(
             stamp_ns, 'obstacles', i, shape.kind if shape.kind == 'cylinder' else 'cube',
             position=(float(place['x']), float(place['y']), shape.half_z),
             yaw=float(place['yaw']), scale=(2 * shape.half_x, 2 * shape.half_y, 2 * shape.half_z),
-            color=OBSTACLE))
+            color=colours['obstacles']))
     gx, gy = (float(v) for v in scenario['goal'])
     markers.append(_marker(stamp_ns, 'goal', 0, 'cylinder',
                            position=(gx, gy, arena.goal_marker_height / 2.0),

@@ -40,20 +40,31 @@ def share_directory(package: str = PACKAGE) -> Path | None:
 
 
 def find_world(world: str) -> Path:
-    """Resolve a world file: an existing path, or a name under ``share/nav_sim/worlds``."""
+    """Resolve a world file: an existing path, or a name under ``share/nav_sim/worlds``.
+
+    A name may leave out its ``.xml`` (``rooms`` is ``rooms.xml``).
+    """
     candidate = Path(world).expanduser()
     if candidate.is_file():
         return candidate.resolve()
-    searched: list[str] = [str(candidate)]
     share = share_directory()
+    shipped = sorted(p.name for p in (share / 'worlds').glob('*.xml')) if share else []
+    if candidate.name != world or not world:  # a path: nothing to look up by name
+        raise WorldNotFoundError(f'world file {candidate} not found: give an existing MJCF '
+                                 f'file, or the name of a shipped world ({", ".join(shipped)})')
+    searched: list[str] = [str(candidate)]
     if share is not None:
-        path = share / 'worlds' / world
-        if path.is_file():
-            return path
-        searched.append(str(path))
-    else:
-        searched.extend(f'{p}/share/ament_index/resource_index/packages/{PACKAGE}'
-                        for p in ament_prefixes())
+        names = [world] if candidate.suffix else [world, f'{world}.xml']
+        for name in names:
+            path = share / 'worlds' / name
+            if path.is_file():
+                return path
+            searched.append(str(path))
+        raise WorldNotFoundError(f'world {world!r} not found; searched: {", ".join(searched)}. '
+                                 f'The shipped worlds are {", ".join(shipped)}; a world of '
+                                 'your own is given by its path (docs/worlds.md)')
+    searched.extend(f'{p}/share/ament_index/resource_index/packages/{PACKAGE}'
+                    for p in ament_prefixes())
     raise WorldNotFoundError(
         f'world {world!r} not found; searched: {", ".join(searched)}. Install the project '
         f'(pip install .) or set AMENT_PREFIX_PATH to the prefix it was installed into.')

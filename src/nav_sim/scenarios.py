@@ -4,7 +4,10 @@ A *layout* places some of the world's obstacle slots in the arena.  Two banks of
 generated from fixed bank seeds: a training bank and a held-out bank whose layouts all differ from
 every training layout.  A *scenario* is a layout plus a robot start pose and a goal position, drawn
 from ``numpy.random.default_rng([split_id, seed])`` so that the same (seed, split) always gives
-the same scenario.
+the same scenario.  Every scenario is solvable by construction: a start and goal that no
+collision-free path for the robot's footprint joins (``nav_sim.footprint``, the planner's map)
+are drawn again from the same generator, so a world where every first draw is solvable (the
+default arena) keeps its scenarios bit for bit.
 """
 
 from __future__ import annotations
@@ -17,65 +20,16 @@ import numpy as np
 
 from nav_sim.config import SimConfig, normalise_split, validate_seed
 from nav_sim.errors import ScenarioError
+from nav_sim.footprint import FootprintMap
+from nav_sim.geometry import ArenaGeometry, Layout, Placement, clearance, distance_to_wall
 
 SPLIT_IDS = {'train': 0, 'heldout': 1}
-OBSTACLE_GAP = 0.15       # free gap between obstacles and to walls (> robot diameter 0.074 m)
 START_CLEARANCE = 0.05    # extra free space around the robot at its start pose
 GOAL_CLEARANCE = 0.11     # free space around the goal position (m), whatever the marker's size
 GOAL_MARGIN = 0.06        # ... and at least this much beyond the robot's body
 MARKER_GAP = 0.01         # ... and beyond the goal marker, which never touches an obstacle
 MIN_LAYOUT_DIFFERENCE = 0.1  # a held-out layout differs from every training one by > 10 cm
 MAX_TRIES = 10_000
-
-
-@dataclass(frozen=True)
-class ObstacleShape:
-    """Footprint of one obstacle slot of the world: a box (half extents) or a cylinder."""
-
-    name: str
-    kind: str
-    half_x: float
-    half_y: float
-    half_z: float = 0.0  # half its height (the live view draws it; sampling needs none)
-
-    @property
-    def bounding_radius(self) -> float:
-        """Return the radius of the circle around the slot centre that covers the footprint."""
-        return self.half_x if self.kind == 'cylinder' else math.hypot(self.half_x, self.half_y)
-
-
-@dataclass(frozen=True)
-class ArenaGeometry:
-    """The world's arena as its MJCF defines it, read once (``nav_sim.world.World``).
-
-    Scenario sampling needs the size, the robot's radius and the slots' footprints; the live
-    view also draws the walls (boxes: centre x, y, z and half extents) and the robot's height.
-    """
-
-    half_size: float
-    robot_radius: float
-    shapes: tuple[ObstacleShape, ...]
-    walls: tuple[tuple[float, float, float, float, float, float], ...] = ()
-    robot_height: float = 0.0
-
-
-@dataclass(frozen=True)
-class Placement:
-    """One obstacle slot placed at (x, y) with heading yaw."""
-
-    slot: int
-    x: float
-    y: float
-    yaw: float
-
-
-@dataclass(frozen=True)
-class Layout:
-    """An obstacle layout of a bank."""
-
-    split: str
-    index: int
-    placements: tuple[Placement, ...]
 
 
 @dataclass(frozen=True)
@@ -88,6 +42,7 @@ class Scenario:
     start: tuple[float, float, float]
     goal: tuple[float, float]
     initial_distance: float
+    look: Any = None  # the drawn look (``nav_sim.looks.Look``) when looks are randomised
 
     def to_dict(self) -> dict[str, Any]:
         """Return a JSON-ready description.
@@ -101,47 +56,31 @@ class Scenario:
             'initial_distance': round(self.initial_distance, 4),
             'obstacles': [{k: (round(v, 4) if isinstance(v, float) else v)
                            for k, v in asdict(p).items()} for p in self.layout.placements],
+            **({} if self.look is None else {'look': self.look.to_dict()}),
         }
 
 
-def distance_to_obstacle(x: float, y: float, shape: ObstacleShape, place: Placement) -> float:
-    """Signed 2-D distance from a point to an obstacle footprint (negative inside)."""
-    dx, dy = x - place.x, y - place.y
-    if shape.kind == 'cylinder':
-        return math.hypot(dx, dy) - shape.half_x
-    c, s = math.cos(place.yaw), math.sin(place.yaw)
-    qx, qy = abs(c * dx + s * dy) - shape.half_x, abs(-s * dx + c * dy) - shape.half_y
-    outside = math.hypot(max(qx, 0.0), max(qy, 0.0))
-    return outside + min(max(qx, qy), 0.0)
-
-
-def clearance(x: float, y: float, layout: Layout, geometry: ArenaGeometry) -> float:
-    """Free distance from a point to the nearest wall or obstacle of a layout."""
-    nearest = geometry.half_size - max(abs(x), abs(y))
-    for place in layout.placements:
-        shape = geometry.shapes[place.slot]
-        nearest = min(nearest, distance_to_obstacle(x, y, shape, place))
-    return nearest
-
-
 def _sample_layout(rng: np.random.Generator, split: str, index: int, count: int,
-                   geometry: ArenaGeometry) -> Layout:
+                   geometry: ArenaGeometry, gap: float) -> Layout:
     slots = sorted(int(s) for s in rng.choice(len(geometry.shapes), size=count, replace=False))
     for _ in range(MAX_TRIES):
         placements: list[Placement] = []
         for slot in slots:
             radius = geometry.shapes[slot].bounding_radius
-            limit = geometry.half_size - radius - OBSTACLE_GAP
+            limit = geometry.half_size - radius - gap
             x, y = (float(v) for v in rng.uniform(-limit, limit, size=2))
             yaw = float(rng.uniform(-math.pi, math.pi))
             if all(math.hypot(x - p.x, y - p.y) - radius - geometry.shapes[p.slot].bounding_radius
-                   >= OBSTACLE_GAP for p in placements):
+                   >= gap for p in placements) and all(
+                    distance_to_wall(x, y, wall) - radius >= gap
+                    for wall in geometry.interior_walls):
                 placements.append(Placement(slot, x, y, yaw))
             else:
                 break
         if len(placements) == count:
             return Layout(split, index, tuple(placements))
-    raise ScenarioError(f'could not place {count} obstacles with {OBSTACLE_GAP} m gaps')
+    raise ScenarioError(f'could not place {count} obstacles with {gap} m gaps in the arena; '
+                        'lower num_obstacles or obstacle_gap')
 
 
 def layout_difference(a: Layout, b: Layout) -> float:
@@ -159,15 +98,16 @@ def build_banks(config: SimConfig, geometry: ArenaGeometry) -> dict[str, tuple[L
     if count > len(geometry.shapes):
         raise ScenarioError(f'num_obstacles={count} but the world has only '
                             f'{len(geometry.shapes)} obstacle slots')
+    gap = config.obstacle_gap
     rng = np.random.default_rng(config.train_bank_seed)
-    train = tuple(_sample_layout(rng, 'train', i, count, geometry)
+    train = tuple(_sample_layout(rng, 'train', i, count, geometry, gap)
                   for i in range(config.train_layouts))
     rng = np.random.default_rng(config.heldout_bank_seed)
     heldout: list[Layout] = []
     for _ in range(MAX_TRIES):
         if len(heldout) == config.heldout_layouts:
             break
-        candidate = _sample_layout(rng, 'heldout', len(heldout), count, geometry)
+        candidate = _sample_layout(rng, 'heldout', len(heldout), count, geometry, gap)
         if all(layout_difference(candidate, t) > MIN_LAYOUT_DIFFERENCE for t in train):
             heldout.append(candidate)
     else:
@@ -210,11 +150,30 @@ def sample_scenario(seed: Any, split: str, banks: dict[str, tuple[Layout, ...]],
     rng = np.random.default_rng([SPLIT_IDS[split], seed])
     bank = banks[split]
     layout = bank[int(rng.integers(len(bank)))]
-    start_xy = _sample_point(rng, layout, geometry, geometry.robot_radius + START_CLEARANCE,
-                             'start')
-    yaw = float(rng.uniform(-math.pi, math.pi))
-    goal = _sample_point(rng, layout, geometry, goal_clearance(geometry, config), 'goal',
-                         far_from=start_xy,
-                         min_distance=config.min_start_goal_distance)
-    distance = math.hypot(goal[0] - start_xy[0], goal[1] - start_xy[1])
-    return Scenario(seed, split, layout, (start_xy[0], start_xy[1], yaw), goal, distance)
+    paths = footprint_map(geometry, config)
+    for _ in range(MAX_TRIES):
+        start_xy = _sample_point(rng, layout, geometry, geometry.robot_radius + START_CLEARANCE,
+                                 'start')
+        yaw = float(rng.uniform(-math.pi, math.pi))
+        goal = _sample_point(rng, layout, geometry, goal_clearance(geometry, config), 'goal',
+                             far_from=start_xy,
+                             min_distance=config.min_start_goal_distance)
+        if paths.reachable(layout, start_xy, goal):  # solvable: else draw both again
+            distance = math.hypot(goal[0] - start_xy[0], goal[1] - start_xy[1])
+            return Scenario(seed, split, layout, (start_xy[0], start_xy[1], yaw), goal, distance)
+    raise ScenarioError(f'no solvable scenario in layout {layout.split}/{layout.index}: no '
+                        'collision-free path joins a start and a goal; lower num_obstacles or '
+                        'obstacle_gap, or open the walls')
+
+
+_MAPS: dict[tuple[ArenaGeometry, SimConfig], FootprintMap] = {}
+
+
+def footprint_map(geometry: ArenaGeometry, config: SimConfig) -> FootprintMap:
+    """Return the footprint map the generator checks a world's scenarios on (one per world)."""
+    key = (geometry, config)
+    if key not in _MAPS:
+        if len(_MAPS) >= 8:  # a process plays a few worlds: keep the recent ones
+            _MAPS.pop(next(iter(_MAPS)))
+        _MAPS[key] = FootprintMap(geometry, config)
+    return _MAPS[key]

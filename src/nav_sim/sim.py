@@ -10,6 +10,7 @@ new pose.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -18,6 +19,7 @@ import numpy as np
 
 from nav_sim.config import SimConfig
 from nav_sim.errors import EpisodeNotStartedError
+from nav_sim.looks import draw_look
 from nav_sim.scenarios import Scenario, build_banks, sample_scenario
 from nav_sim.world import World
 
@@ -150,8 +152,15 @@ class NavSim:
 
     # --- episode control ------------------------------------------------------------------
     def reset(self, seed: int, split: str = 'train') -> Scenario:
-        """Stop the motors, load the scenario of (seed, split) and settle; raises ScenarioError."""
+        """Stop the motors, load the scenario of (seed, split) and settle; raises ScenarioError.
+
+        With ``randomize_look`` the scenario also carries its drawn look, painted on the world.
+        """
         scenario = sample_scenario(seed, split, self.banks, self.world.geometry, self.config)
+        if self.config.randomize_look:
+            scenario = dataclasses.replace(scenario, look=draw_look(scenario.seed,
+                                                                    scenario.split))
+            self.world.apply_look(scenario.look)
         self.stop()
         self.world.set_layout(scenario.layout)
         self.world.set_goal(*scenario.goal)

@@ -40,10 +40,16 @@ from nav_sim.config import (
     realtime_period_ns,
     validate_seed,
 )
-from nav_sim.errors import ConfigError, NavSimError
+from nav_sim.errors import (
+    ConfigError,
+    NavSimError,
+    ScenarioError,
+    WorldError,
+    WorldNotFoundError,
+)
 from nav_sim.lockstep import spin_lockstep
 from nav_sim.sim import EVENT_NONE, NavSim, WheelCommand, twist_to_wheels
-from nav_sim.sim_process import READY_MESSAGE
+from nav_sim.sim_process import ERROR_PREFIX, READY_MESSAGE
 from nav_sim.step_timing import StepTiming
 
 DYNAMIC = ('seed', 'split', 'realtime_rate', 'cmd_vel_timeout')
@@ -59,7 +65,7 @@ class SimNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         """Declare the parameters, load the world and create the topics and services."""
         super().__init__(interface.NODE_NAME, **kwargs)
-        sim_values = self._declare(SimConfig, read_only=True)
+        sim_values = self._declare(SimConfig, read_only=True, defaults=self._world_defaults())
         node_values = self._declare(NodeConfig, read_only=False)
         self._warn_unknown_overrides()
         self.settings = NodeConfig(**node_values)
@@ -90,33 +96,47 @@ class SimNode(Node):
             f'{self.sim.world.path}')
 
     # --- set-up ---------------------------------------------------------------------------
-    def _declare(self, config_type: type, read_only: bool) -> dict[str, Any]:
+    def _declare(self, config_type: type, read_only: bool,
+                 defaults: dict[str, Any] | None = None) -> dict[str, Any]:
         """Declare a parameter per field; a given value (params file, ``-p``) is converted.
 
         A double parameter needs a value with a decimal point (``1.0``, not ``1``), as ROS 2
         requires of a params file; a value of another type that converts without loss (``'4'``
         for an integer) is taken; any other raises ConfigError naming the parameter and the
-        type it takes.
+        type it takes.  A parameter not given takes its value from ``defaults`` (the world's
+        settings), else the field's default.
         """
         values = {}
         for field in dataclasses.fields(config_type):
             fixed = read_only or (config_type is NodeConfig and field.name not in DYNAMIC)
             descriptor = ParameterDescriptor(description=field.metadata['help'],
                                              read_only=fixed)
-            value = field.default
-            given = self._parameter_overrides.get(field.name)  # rclpy has no public getter
+            value = (defaults or {}).get(field.name, field.default)
+            given = self._given(field)
             if given is not None:
-                kind = type(field.default)
-                if kind is float and type(given.value) is int:
-                    raise ConfigError(f'parameter {field.name} takes a double: write '
-                                      f'{given.value}.0, not {given.value}')
-                try:
-                    value = convert(field.name, type(field.default), given.value)
-                except ConfigError as exc:
-                    raise ConfigError(f'parameter {exc}') from None
+                value = given
             values[field.name] = self.declare_parameter(field.name, value, descriptor,
                                                         ignore_override=True).value
         return values
+
+    def _given(self, field: dataclasses.Field) -> Any:
+        """Return the value given for a field's parameter, converted (None: not given)."""
+        given = self._parameter_overrides.get(field.name)  # rclpy has no public getter
+        if given is None:
+            return None
+        kind = type(field.default)
+        if kind is float and type(given.value) is int:
+            raise ConfigError(f'parameter {field.name} takes a double: write '
+                              f'{given.value}.0, not {given.value}')
+        try:
+            return convert(field.name, kind, given.value)
+        except ConfigError as exc:
+            raise ConfigError(f'parameter {exc}') from None
+
+    def _world_defaults(self) -> dict[str, Any]:
+        """Return the sim parameters the chosen world sets (its ``visnav:`` settings)."""
+        world = self._given(next(f for f in dataclasses.fields(SimConfig) if f.name == 'world'))
+        return SimConfig.world_defaults(world if world is not None else SimConfig.world)
 
     def _warn_unknown_overrides(self) -> None:
         """Warn about each given parameter this node does not declare (a typo in a params file)."""
@@ -406,7 +426,11 @@ def main(args: list[str] | None = None) -> None:
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     except ConfigError as exc:
-        print(f'sim_node: invalid configuration: {exc}')
+        print(f'{ERROR_PREFIX}invalid configuration: {exc}')
+        raise SystemExit(2) from None
+    except (WorldError, WorldNotFoundError, ScenarioError) as exc:  # one line per problem
+        for line in str(exc).splitlines():
+            print(f'{ERROR_PREFIX}invalid world: {line}')
         raise SystemExit(2) from None
     except Exception:
         if rclpy.ok():

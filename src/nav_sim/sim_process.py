@@ -15,6 +15,7 @@ from nav_sim.errors import ConfigError
 from nav_sim.paths import package_prefix
 
 READY_MESSAGE = 'nav_sim ready:'  # how the node's last start-up log line begins
+ERROR_PREFIX = 'sim_node: '       # how the node's own one-line errors begin (then exit code 2)
 
 
 def typed_params(params: Mapping[str, Any]) -> dict[str, Any]:
@@ -110,7 +111,10 @@ class SimProcess:
         self._ready = False
 
     def failure(self) -> str | None:
-        """None while the process runs; else its exit code and the end of its log."""
+        """None while the process runs; else its exit code and why.
+
+        Why: the node's own error lines (a bad parameter or world), else the end of its log.
+        """
         code = self.process.poll()
         if code is None:
             return None
@@ -118,7 +122,9 @@ class SimProcess:
         if self._log is not None:
             self._log.seek(0)
             lines = self._log.read().decode(errors='replace').strip().splitlines()
-            tail = ': ' + ' | '.join(lines[-5:]) if lines else ''
+            errors = [line.removeprefix(ERROR_PREFIX) for line in lines
+                      if line.startswith(ERROR_PREFIX)]
+            tail = ': ' + ' | '.join(errors or lines[-5:]) if lines else ''
         return f'sim_node exited with code {code}{tail}'
 
     def ready(self) -> bool:

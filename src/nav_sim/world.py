@@ -14,10 +14,20 @@ import mujoco
 import numpy as np
 
 from nav_sim.config import SimConfig
-from nav_sim.paths import find_world
-from nav_sim.scenarios import ArenaGeometry, Layout, ObstacleShape
+from nav_sim.contract import (
+    CAMERA,
+    FLOOR,
+    GOAL,
+    OBSTACLE_PREFIX,
+    ROBOT,
+    ROBOT_GEOM,
+    WALL_PREFIX,
+    shown_material,
+)
+from nav_sim.contract import load_world as load_checked
+from nav_sim.geometry import ArenaGeometry, Layout, ObstacleShape
+from nav_sim.looks import Look
 
-CAMERA = 'front_camera'
 PARKED = np.array([10.0, 10.0, -1.0])  # where unused obstacle slots wait, out of sight
 
 
@@ -25,14 +35,17 @@ class World:
     """An MJCF model with its data, named ids and a fast offscreen camera renderer."""
 
     def __init__(self, config: SimConfig) -> None:
-        """Load the configured world, apply the config to the model and look up the ids."""
+        """Load and check the configured world, apply the config and look up the ids.
+
+        A world that breaks the contract raises WorldError (``nav_sim.contract``).
+        """
         self.config = config
-        self.path = find_world(config.world)
-        self.model = mujoco.MjModel.from_xml_path(str(self.path))
+        self.path, self.model = load_checked(config)
         self.data = mujoco.MjData(self.model)
         self._configure_model()
         self._ids()
         self.geometry = self._arena_geometry()
+        self._plain_look = self._look_state()
         self._renderer: mujoco.Renderer | None = None
 
     def _configure_model(self) -> None:
@@ -48,7 +61,7 @@ class World:
         # slots inflate to metres: the default near plane would hide anything within ~7 cm of
         # the camera (the goal at the moment of success, a wall just before a collision).
         m.vis.map.znear = cfg.camera_near_clip / m.stat.extent
-        goal = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, 'goal')
+        goal = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, GOAL)
         m.geom_size[goal, :2] = (cfg.goal_marker_radius, cfg.goal_marker_height / 2.0)
         m.geom_rbound[goal] = math.hypot(cfg.goal_marker_radius, cfg.goal_marker_height / 2.0)
 
@@ -70,20 +83,23 @@ class World:
         m = self.model
         name2id = mujoco.mj_name2id
         self.camera_id = name2id(m, mujoco.mjtObj.mjOBJ_CAMERA, CAMERA)
-        self.robot_geom = name2id(m, mujoco.mjtObj.mjOBJ_GEOM, 'robot_body')
-        self.robot_body = name2id(m, mujoco.mjtObj.mjOBJ_BODY, 'robot')
+        self.robot_geom = name2id(m, mujoco.mjtObj.mjOBJ_GEOM, ROBOT_GEOM)
+        self.robot_body = name2id(m, mujoco.mjtObj.mjOBJ_BODY, ROBOT)
         joints = [name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)
                   for j in ('base_x', 'base_y', 'base_yaw')]
         self.qpos_slice = _consecutive([int(m.jnt_qposadr[j]) for j in joints], 'qpos')
         self.qvel_slice = _consecutive([int(m.jnt_dofadr[j]) for j in joints], 'qvel')
-        self.goal_mocap = m.body_mocapid[name2id(m, mujoco.mjtObj.mjOBJ_BODY, 'goal')]
+        self.goal_mocap = m.body_mocapid[name2id(m, mujoco.mjtObj.mjOBJ_BODY, GOAL)]
         self.obstacle_geoms: list[int] = []
         self.obstacle_mocaps: list[int] = []
         index = 0
-        while (body := name2id(m, mujoco.mjtObj.mjOBJ_BODY, f'obstacle_{index}')) >= 0:
+        while (body := name2id(m, mujoco.mjtObj.mjOBJ_BODY, f'{OBSTACLE_PREFIX}{index}')) >= 0:
             self.obstacle_mocaps.append(int(m.body_mocapid[body]))
-            self.obstacle_geoms.append(name2id(m, mujoco.mjtObj.mjOBJ_GEOM, f'obstacle_{index}'))
+            self.obstacle_geoms.append(name2id(m, mujoco.mjtObj.mjOBJ_GEOM,
+                                               f'{OBSTACLE_PREFIX}{index}'))
             index += 1
+        self.wall_geoms = [g for g in range(m.ngeom) if m.geom(g).name.startswith(WALL_PREFIX)]
+        self.floor_geom = name2id(m, mujoco.mjtObj.mjOBJ_GEOM, FLOOR)
 
     def _arena_geometry(self) -> ArenaGeometry:
         """Read the arena from the model: the one place its MuJoCo geometry is read."""
@@ -98,13 +114,47 @@ class World:
                 shapes.append(ObstacleShape(m.geom(geom).name, 'box', float(size[0]),
                                             float(size[1]), float(size[2])))
         walls = tuple(tuple(float(v) for v in (*m.geom_pos[geom], *m.geom_size[geom]))
-                      for geom in range(m.ngeom) if m.geom(geom).name.startswith('wall')
-                      and m.geom_type[geom] == mujoco.mjtGeom.mjGEOM_BOX)
+                      for geom in self.wall_geoms)
         wall = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, 'wall_east')
         half_size = float(m.geom_pos[wall][0] - m.geom_size[wall][0])
         robot = self.robot_geom
         return ArenaGeometry(half_size, float(m.geom_size[robot][0]), tuple(shapes), walls,
                              2.0 * float(m.geom_size[robot][1]) + float(m.geom_pos[robot][2]))
+
+    # --- the look -------------------------------------------------------------------------
+    def _look_state(self) -> dict[str, np.ndarray]:
+        """Copy what a look changes: surface colours, the lights, the headlight's ambient."""
+        m = self.model
+        return {'mat_rgba': m.mat_rgba.copy(), 'geom_rgba': m.geom_rgba.copy(),
+                'light_dir': m.light_dir.copy(), 'light_diffuse': m.light_diffuse.copy(),
+                'ambient': m.vis.headlight.ambient.copy()}
+
+    def apply_look(self, look: Look | None) -> None:
+        """Paint a drawn look on the model (None: the world's own look).
+
+        Floor, walls and obstacles take the look's colours (through their materials, which
+        tint a texture; a geom without a material directly); every light shines from the
+        look's direction with its intensity, and the headlight's ambient is the look's.  The
+        goal is never touched.  Call ``mj_forward`` after it (a reset does).
+        """
+        m, plain = self.model, self._plain_look
+        m.mat_rgba[:], m.geom_rgba[:] = plain['mat_rgba'], plain['geom_rgba']
+        m.light_dir[:], m.light_diffuse[:] = plain['light_dir'], plain['light_diffuse']
+        m.vis.headlight.ambient[:] = plain['ambient']
+        if look is None:
+            return
+        surfaces = ((look.floor, [self.floor_geom]), (look.walls, self.wall_geoms),
+                    (look.obstacles, self.obstacle_geoms))
+        for colour, geoms in surfaces:
+            for geom in geoms:
+                material = shown_material(m, geom)
+                if material >= 0:
+                    m.mat_rgba[material, :3] = colour
+                else:
+                    m.geom_rgba[geom, :3] = colour
+        m.light_dir[:] = look.light_dir
+        m.light_diffuse[:] = look.light_diffuse
+        m.vis.headlight.ambient[:] = look.ambient
 
     # --- placing things -------------------------------------------------------------------
     def set_layout(self, layout: Layout) -> None:

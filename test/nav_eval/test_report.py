@@ -351,7 +351,8 @@ def test_the_learner_and_its_defaults_read_the_same_in_yaml_config_and_report(
     assert f'**Learner:** {TrainConfig().learner().describe()}, `CnnPolicy`.' in text
     for key in run_report.HYPERPARAMETERS:
         value = json.dumps(defaults[key]) if isinstance(defaults[key], dict) else defaults[key]
-        assert shipped[key] == defaults[key], key
+        # the file's max_episode_steps is 0, the world's limit: 100 in arena.xml
+        assert shipped[key] == (0 if key == 'max_episode_steps' else defaults[key]), key
         assert f'| {key} | {value} |' in text, key
 
 

@@ -142,14 +142,20 @@ def test_aggregate_a_folder_of_runs_with_two_configurations(finished, tmp_path):
 def test_bad_settings_are_one_line_errors(tmp_path):
     for args, words in ((['--grid', 'nonsense=1,2'], 'unknown setting'),
                         (['--grid', 'turn_speed='], 'bad setting'),
-                        (['--set', 'learning_rate=fast'], 'learning_rate')):
-        result = sweep(*args, '--storage', str(tmp_path), timeout=120)
+                        (['--set', 'learning_rate=fast'], 'learning_rate'),
+                        (['--set', f'world={tmp_path}/no_such.xml'], 'no_such.xml not found'),
+                        (['--grid', 'world=arena.xml,no_such'], "world 'no_such' not found"),
+                        (['--set', 'num_obstacles=9'], 'but num_obstacles is 9')):
+        result = sweep(*args, '--storage', str(tmp_path / 'runs'), '--name', 'bad',
+                       timeout=120)
         assert result.returncode == 1 and words in result.stderr, explain(result)
         assert 'Traceback' not in result.stderr and len(result.stderr.splitlines()) == 1
+        assert not (tmp_path / 'runs' / 'bad').exists()  # refused before anything is written
 
 
 def test_a_failing_trial_is_retried_then_reported(tmp_path):
-    result = sweep('--seeds', '1', *TINY, '--set', 'num_obstacles=9', '--no-baselines',
+    # the world loads (its settings are checked before Ray), but no layout fits 0.6 m gaps
+    result = sweep('--seeds', '1', *TINY, '--set', 'obstacle_gap=0.6', '--no-baselines',
                    '--storage', str(tmp_path), '--name', 'f', timeout=600)
     assert result.returncode == 1, explain(result)
     assert 'retry seed1' in result.stdout and 'FAILED seed1' in result.stdout

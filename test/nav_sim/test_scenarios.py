@@ -6,10 +6,9 @@ import pytest
 
 from nav_sim.config import SimConfig
 from nav_sim.errors import ScenarioError
+from nav_sim.geometry import clearance, distance_to_obstacle
 from nav_sim.scenarios import (
     MIN_LAYOUT_DIFFERENCE,
-    clearance,
-    distance_to_obstacle,
     goal_clearance,
     layout_difference,
     sample_scenario,

@@ -24,6 +24,7 @@ from nav_eval.evaluation.policies import DQNPolicy, ExploringDQNPolicy, Policy, 
 from nav_eval.evaluation.sets import EvalSet, run_config
 from nav_eval.seeds import seed_range
 from nav_gym.env import NavigationEnv
+from nav_gym.errors import TrainConfigError
 from nav_gym.run_dir import (
     BAGS,
     EPISODES_CSV,
@@ -99,9 +100,14 @@ def _recorded(recorder: Any, stamp_ns: int, timeout: float = 5.0) -> None:
 
 
 def arena_description(sim_params: dict[str, Any]) -> dict[str, Any]:
-    """Arena geometry for top-down plots (loads the MJCF; renders nothing)."""
+    """Arena geometry for top-down plots (loads the MJCF; renders nothing).
+
+    ``walls`` are the interior walls (centre x, y and half extents), e.g. between rooms.
+    """
     geometry, config = load_arena(sim_params)
-    return {'half_size': geometry.half_size, 'robot_radius': geometry.robot_radius,
+    return {'world': config.world, 'half_size': geometry.half_size,
+            'robot_radius': geometry.robot_radius,
+            'walls': [[w[0], w[1], w[3], w[4]] for w in geometry.interior_walls],
             'goal_radius': config.goal_radius, 'goal_marker_radius': config.goal_marker_radius,
             'shapes': [{'name': s.name, 'kind': s.kind, 'half_x': s.half_x, 'half_y': s.half_y}
                        for s in geometry.shapes]}
@@ -201,9 +207,19 @@ def env_for_run(config: TrainConfig, record: bool, sim: str = 'embedded') -> Nav
 
 
 def evaluate(run_dir: Path, sets: list[EvalSet], out: Path | None = None,
-             record: bool = True, *, live_port: int = 0) -> dict[str, Any]:
-    """Evaluate every set and write results.json / results.md / episodes.csv under ``out``."""
+             record: bool = True, *, live_port: int = 0,
+             sim_params: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Evaluate every set and write results.json / results.md / episodes.csv under ``out``.
+
+    ``sim_params`` plays the run's policies in another world or look
+    (``TrainConfig.in_world``); results.json's ``config`` says which.
+    """
     config = run_config(run_dir)
+    if sim_params:
+        try:
+            config = config.in_world(sim_params)
+        except TrainConfigError as exc:
+            raise EvaluationError(f'--sim-params: {exc}') from None
     out = out or run_dir / EVAL
     try:
         out.mkdir(parents=True, exist_ok=True)

@@ -2,9 +2,11 @@
 
 Pure matplotlib (``Agg`` backend) on the files a run directory holds; no ROS, no MuJoCo.  Every
 figure function writes a PNG and returns its path.  Geometry follows ``nav_sim.scenarios``: the
-arena is the square ``[-half_size, half_size]^2``; obstacle slot ``i`` has the footprint
+arena is the square ``[-half_size, half_size]^2`` with the interior walls ``arena['walls']``
+(axis-aligned boxes: centre x, y and half extents); obstacle slot ``i`` has the footprint
 ``arena['shapes'][i]`` (a box with half extents ``half_x``, ``half_y`` rotated by the placement's
-yaw, or a cylinder of radius ``half_x``).
+yaw, or a cylinder of radius ``half_x``).  A scenario with a drawn look (``scenario['look']``,
+``nav_sim.looks``) is drawn in its floor, wall and obstacle colours.
 """
 
 from __future__ import annotations
@@ -124,18 +126,28 @@ def box_corners(x: float, y: float, yaw: float, half_x: float, half_y: float) ->
 
 
 def draw_arena(ax: Axes, arena: dict[str, Any], scenario: dict[str, Any]) -> None:
-    """Walls, obstacles, goal (marker and dashed success radius) and the start pose."""
+    """Walls, obstacles, goal (marker and dashed success radius) and the start pose.
+
+    In the scenario's drawn look if it has one, else in the plain colours.
+    """
+    look = scenario.get('look') or {}
+    walls, floor, obstacles = (tuple(look[k]) if k in look else plain for k, plain in
+                               (('walls', 'dimgrey'), ('floor', 'whitesmoke'),
+                                ('obstacles', 'orangered')))
     half = float(arena.get('half_size', 1.0))
     wall = 0.05 * half
     ax.add_patch(Rectangle((-half - wall, -half - wall), 2 * (half + wall), 2 * (half + wall),
-                           facecolor='dimgrey', edgecolor='none', zorder=0))
-    ax.add_patch(Rectangle((-half, -half), 2 * half, 2 * half, facecolor='whitesmoke',
+                           facecolor=walls, edgecolor='none', zorder=0))
+    ax.add_patch(Rectangle((-half, -half), 2 * half, 2 * half, facecolor=floor,
                            edgecolor='black', lw=1, zorder=0.5))
+    for x, y, half_x, half_y in arena.get('walls', []):
+        ax.add_patch(Rectangle((x - half_x, y - half_y), 2 * half_x, 2 * half_y, facecolor=walls,
+                               edgecolor='black', lw=0.5, zorder=0.8, gid='wall'))
     shapes = arena.get('shapes', [])
     for placement in scenario.get('obstacles', []):
         slot = int(placement['slot'])
-        patch = obstacle_patch(shapes[slot], placement, facecolor='orangered', alpha=0.8,
-                               edgecolor='darkred', zorder=1)
+        patch = obstacle_patch(shapes[slot], placement, facecolor=obstacles, alpha=0.8,
+                               edgecolor='black' if look else 'darkred', zorder=1)
         patch.set_gid(f'obstacle_{slot}')
         ax.add_patch(patch)
     gx, gy = scenario['goal'][:2]

@@ -26,6 +26,7 @@ from nav_gym.errors import NavGymError
 from nav_gym.train_config import FIELDS, build
 from nav_sim.errors import NavSimError
 from nav_sim.sim_process import typed_params
+from nav_sim.world import load_arena
 
 SWEEP_FILE = 'sweep.json'
 FAILED_FILE = 'failed.json'  # trials that failed twice, with their error and log tail
@@ -144,22 +145,36 @@ def _is_sim_param(key: str) -> bool:
 
 
 def training_config(overrides: dict[str, str]) -> Any:
-    """Build the full TrainConfig of one grid point (sim settings go into ``sim_params``)."""
+    """Build the full TrainConfig of one grid point (sim settings go into ``sim_params``).
+
+    Its world is loaded and checked against the contract (docs/worlds.md): a bad world stops
+    the sweep here, before any trial starts.  The world's settings are the defaults of the
+    settings the grid point leaves out.
+    """
     train = {k: v for k, v in overrides.items() if k in FIELDS and k != 'sim_params'}
     sim = {k: v for k, v in overrides.items() if k not in FIELDS}
     try:
         sim = typed_params(sim)
-        return build(None, {**train, 'sim_params': sim}).with_full_sim_params()
+        config = build(None, {**train, 'sim_params': sim}).with_full_sim_params()
+        load_arena(config.sim_params)
+        return config
     except (NavGymError, NavSimError) as exc:
-        raise SweepError(f'configuration {overrides}: {exc}') from None
+        lines = str(exc).splitlines() or ['']
+        raise SweepError('\n'.join([f'configuration {overrides}: {lines[0]}', *lines[1:]])
+                         ) from None
 
 
 def write_configs(spec: SweepSpec) -> None:
-    """Validate every grid point and write its training config under ``configs/``."""
+    """Validate every grid point, then write its training config under ``configs/``.
+
+    A bad grid point (a setting, a world) raises SweepError before anything is written.
+    """
+    configs = {name: dataclasses.replace(training_config(overrides), run_name='',
+                                         runs_dir='runs')
+               for name, overrides in spec.configurations()}
     folder = Path(spec.sweep_dir) / CONFIGS
     folder.mkdir(parents=True, exist_ok=True)
-    for name, overrides in spec.configurations():
-        config = dataclasses.replace(training_config(overrides), run_name='', runs_dir='runs')
+    for name, config in configs.items():
         (folder / f'{name}.yaml').write_text(config.to_yaml())
 
 
@@ -202,8 +217,7 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     spec = SweepSpec(str(sweep_dir), seeds['seeds'], grid, fixed, seeds['train_seeds'],
                      seeds['heldout_seeds'], curve, not args.no_baselines, args.record,
                      args.cpus_per_trial, args.gpus_per_trial, NAMING)
-    sweep_dir.mkdir(parents=True, exist_ok=True)
-    write_configs(spec)
+    write_configs(spec)  # creates the sweep directory once every grid point is valid
     data = dataclasses.asdict(spec)
     data.pop('sweep_dir')
     (sweep_dir / SWEEP_FILE).write_text(json.dumps(data, indent=1) + '\n')
