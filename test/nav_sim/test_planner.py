@@ -8,8 +8,8 @@ import pytest
 
 from nav_gym.actions import action_twists
 from nav_gym.config import EnvConfig
+from nav_sim.geometry import Layout, Placement
 from nav_sim.planner import Planner, motion
-from nav_sim.scenarios import Layout, Placement
 from nav_sim.sim import twist_to_wheels
 
 

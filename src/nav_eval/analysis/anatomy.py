@@ -31,7 +31,7 @@ from nav_eval.analysis.failure_layers import goal_mask
 from nav_eval.analysis.metrics import OUTCOMES
 from nav_gym.actions import ACTION_NAMES
 from nav_gym.run_dir import frames_path
-from nav_sim.scenarios import ArenaGeometry, Layout, ObstacleShape, Placement, clearance
+from nav_sim.geometry import ArenaGeometry, Layout, ObstacleShape, Placement, clearance
 
 MIN_PIXELS = 10  # fewer green pixels than this is noise at the image edge, not the goal
 HIT_DIRECTIONS = 360  # points on the robot's rim tried for where a collision touched
@@ -85,7 +85,7 @@ def hit_bearing(trace: dict[str, Any], arena: dict[str, Any]) -> float | None:
 
     From the final pose and the scenario's true geometry (privileged, as evaluation records
     it): of ``HIT_DIRECTIONS`` points on the robot's rim, the one closest to a wall or an
-    obstacle (``nav_sim.scenarios.clearance``).  None for other outcomes.  ``arena`` is an
+    obstacle (``nav_sim.geometry.clearance``).  None for other outcomes.  ``arena`` is an
     evaluation's ``results.json`` arena (half size, robot radius, the slots' shapes).
     """
     if trace['outcome'] != 'collision' or not trace['steps']:
