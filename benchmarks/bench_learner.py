@@ -194,7 +194,9 @@ def main() -> None:
         torch.set_num_threads(args.threads)
     learner_keys = {f.name for f in dataclasses.fields(train_config.LearnerSpec)}
     common = [s for s in args.set if s.split('=')[0] not in learner_keys]  # both learners'
-    flags = {'vanilla DQN (SB3)': [*common, 'double_q=false'], 'chosen': args.set}
+    vanilla = ['double_q=false', *(f'{k}={str(v).lower()}' for k, v in
+                                   train_config.COMPONENTS.items())]
+    flags = {'vanilla DQN (SB3)': [*common, *vanilla], 'chosen': args.set}
     configs = {name: train_config.build(None, dict(s.split('=', 1) for s in settings))
                for name, settings in flags.items()}
     assert configs['vanilla DQN (SB3)'].learner().vanilla

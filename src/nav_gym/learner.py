@@ -1,12 +1,13 @@
 """The learner: SB3's DQN with Double DQN targets, and the components each flag adds.
 
-The default learner is "DQN (SB3) with Double DQN targets (van Hasselt et al. 2016)": SB3's
-``DQN`` whose TD target lets the online network pick the next action and the target network
-value it, instead of taking the maximum of the target network's values (which overestimates
-where the actions' true values are close: docs/experiments.md measured it here).  Each further
-component has a published basis and a flag in config/train.yaml; all of them off is the
-Double DQN learner, and ``double_q: false`` with all of them off is SB3's own ``DQN`` untouched
-(the workshop's learner, bit for bit).
+The default learner is "DQN (SB3) with Double DQN targets (van Hasselt et al. 2016), 3-step
+returns": SB3's ``DQN`` whose TD target lets the online network pick the next action and the
+target network value it, instead of taking the maximum of the target network's values (which
+overestimates where the actions' true values are close: docs/experiments.md measured it here),
+on SB3's n-step replay buffer.  Each component has a published basis and a flag in
+config/train.yaml (:data:`nav_gym.train_config.COMPONENTS` holds the value that turns it off);
+all of them off is the Double DQN learner, and ``double_q: false`` with all of them off is SB3's
+own ``DQN`` untouched (the workshop's learner, bit for bit: config/workshop.yaml).
 
 - ``n_steps``: n-step returns (Sutton 1988; Rainbow, Hessel et al. 2018), SB3's own
   ``NStepReplayBuffer``;

@@ -56,8 +56,8 @@ CURVE = 'curve'
 REPORT = 'report'
 REPORT_TEXT = 'Result.md'
 #: settings whose default has changed: a run whose config does not name one (it was saved
-#: before the setting existed) trained with this value (SB3's DQN before Double DQN targets)
-LEGACY_DEFAULTS = {'double_q': False}
+#: before the setting existed) trained with this value (SB3's DQN, one-step targets)
+LEGACY_DEFAULTS = {'double_q': False, 'n_steps': 1}
 #: the run settings evaluation must share with training (compared by the diagnosis)
 EVAL_SETTINGS = ('sim_params', 'forward_speed', 'turn_rate', 'turn_speed', 'max_episode_steps',
                  'progress_weight', 'step_penalty', 'goal_reward', 'collision_penalty')

@@ -23,8 +23,9 @@ from nav_sim.sim_process import typed_params
 from nav_sim.world_file import world_settings
 
 _ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
-#: the components' flags (LearnerSpec fields): each at its default is that component off
-COMPONENTS = ('n_steps', 'dueling', 'augment_shift', 'prioritized_replay')
+#: the components' flags (LearnerSpec fields), each with its value that turns the component off
+COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0,
+              'prioritized_replay': False}
 
 
 def _env(name: str) -> Any:
@@ -36,16 +37,19 @@ def _env(name: str) -> Any:
 class LearnerSpec:
     """Which learner a run trains: the TD target and the components (TrainConfig's fields).
 
-    Each component has a published basis; all of them off is the default learner, SB3's DQN
-    with Double DQN targets, and ``double_q: false`` with all of them off is SB3's DQN untouched
-    (the workshop's learner).  :mod:`nav_gym.learner` builds it.
+    Each component has a published basis and is off at its value in :data:`COMPONENTS`.  The
+    default learner is SB3's DQN with Double DQN targets and 3-step returns (adopted in
+    docs/experiments.md); every component off is SB3's DQN with Double DQN targets, and
+    ``double_q: false`` with every component off is SB3's DQN untouched, the workshop's learner
+    (config/workshop.yaml).  :mod:`nav_gym.learner` builds it.
     """
 
     double_q: bool = setting(True, 'Double DQN targets (van Hasselt et al. 2016): the online '
                              "network picks the next action, the target network values it; false: "
-                             "SB3's DQN target (with every component off, the workshop's learner, "
-                             "SB3's DQN exactly)")
-    n_steps: int = setting(1, "n-step returns (SB3's NStepReplayBuffer); 1: one-step targets")
+                             "SB3's DQN target (with n_steps 1 and every other component off, "
+                             "the workshop's learner, SB3's DQN exactly: config/workshop.yaml)")
+    n_steps: int = setting(3, "n-step returns (SB3's NStepReplayBuffer; Sutton 1988, Rainbow); "
+                           '1: one-step targets')
     dueling: bool = setting(False, 'a dueling head, Q = V + A - mean(A) (Wang et al. 2016)')
     augment_shift: int = setting(0, 'shift every sampled observation at random by up to this '
                                  'many pixels, edges replicated (DrQ, Kostrikov et al. 2021; '
@@ -72,8 +76,7 @@ class LearnerSpec:
     def vanilla(self) -> bool:
         """Tell whether this is SB3's DQN untouched (no Double DQN target, no component)."""
         return not self.double_q and all(
-            getattr(self, f.name) == f.default for f in dataclasses.fields(self)
-            if f.name in COMPONENTS)
+            getattr(self, name) == off for name, off in COMPONENTS.items())
 
     def describe(self) -> str:
         """Name the learner as the report and Sweep.md write it."""
@@ -107,7 +110,7 @@ def _learner(name: str) -> Any:
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """The learner on Monitor(NavigationEnv): Double DQN targets, the workshop's settings."""
+    """The learner on Monitor(NavigationEnv): Double DQN, 3-step returns, the workshop settings."""
 
     total_timesteps: int = setting(50_000, 'environment steps to train for')
     learning_rate: float = setting(1e-4, 'optimiser step size')

@@ -74,6 +74,7 @@ def test_scripted_episode_prints_each_transition_and_stops():
     assert 'robot stopped' in out
 
 
+@pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')  # SB3's own, on any n-step load
 def test_smoke_training_checkpoints_resumes_and_loads(tmp_path):
     import numpy as np
     result = run([ros2_run('nav_gym', 'train'), *SMOKE, '--runs-dir', str(tmp_path),
@@ -192,6 +193,18 @@ def test_a_run_saves_its_whole_env_config(tmp_path):
     assert load_config(tmp_path).env_config() == EnvConfig()
     # it trained SB3's DQN: the default of double_q has changed since, not the run
     assert load_config(tmp_path).double_q is False and TrainConfig().double_q is True
+    assert load_config(tmp_path).n_steps == 1 and TrainConfig().n_steps == 3
+    assert load_config(tmp_path).learner().vanilla
+
+
+def test_the_workshop_config_is_sb3_dqn_exactly_and_sets_only_the_learner():
+    import yaml
+
+    from nav_gym.train_config import COMPONENTS
+    path = Path(__file__).parents[2] / 'config' / 'workshop.yaml'
+    config = build(str(path), {})
+    assert config.learner().vanilla and not TrainConfig().learner().vanilla
+    assert set(yaml.safe_load(path.read_text())) <= {'double_q', *COMPONENTS}
 
 
 def test_train_yaml_holds_every_default():

@@ -26,7 +26,7 @@ from nav_gym.learner import (
     max_q_target,
     random_shift,
 )
-from nav_gym.train_config import LearnerSpec, TrainConfig
+from nav_gym.train_config import COMPONENTS, LearnerSpec, TrainConfig
 
 OBS = spaces.Box(0, 255, (3, 84, 84), np.uint8)
 ACTIONS = spaces.Discrete(3)
@@ -44,11 +44,11 @@ def test_the_online_network_picks_and_the_target_network_values():
         [0.5 + 0.9 * 9.0, 1.0])
 
 
-def test_double_dqn_is_the_default_and_sb3_dqn_is_one_flag_away():
-    assert TrainConfig().double_q is True
+def test_double_dqn_with_3_step_returns_is_the_default_and_sb3_dqn_is_one_file_away():
+    assert TrainConfig().double_q is True and TrainConfig().n_steps == 3
     assert TrainConfig().learner() == LearnerSpec()
     assert learner_class(None, LearnerSpec()) is Learner
-    vanilla = TrainConfig(double_q=False).learner()
+    vanilla = TrainConfig(double_q=False, n_steps=1).learner()  # config/workshop.yaml
     assert vanilla.vanilla and learner_class(None, vanilla) is DQN  # SB3's own, untouched
     assert learner_kwargs(vanilla, 0.99) == {} and learner_policy(vanilla) == 'CnnPolicy'
     assert issubclass(learner_class(object(), LearnerSpec()), Learner)  # timed, too
@@ -56,11 +56,15 @@ def test_double_dqn_is_the_default_and_sb3_dqn_is_one_flag_away():
     assert 'double_q' not in TrainConfig().dqn_kwargs()  # not an SB3 argument
 
 
-def test_every_component_has_a_flag_whose_default_is_off():
+def test_every_component_has_a_flag_and_a_value_that_turns_it_off():
     spec = LearnerSpec()
     assert (spec.n_steps, spec.dueling, spec.augment_shift, spec.prioritized_replay) == (
-        1, False, 0, False)
-    assert spec.describe() == 'DQN (SB3) with Double DQN targets (van Hasselt et al. 2016)'
+        3, False, 0, False)  # n-step returns adopted (docs/experiments.md), the others off
+    assert spec.describe() == ('DQN (SB3) with Double DQN targets (van Hasselt et al. 2016), '
+                               '3-step returns')
+    off = LearnerSpec(**COMPONENTS)
+    assert off.describe() == 'DQN (SB3) with Double DQN targets (van Hasselt et al. 2016)'
+    assert dataclasses.replace(off, double_q=False).vanilla
     full = LearnerSpec(n_steps=3, dueling=True, augment_shift=4, prioritized_replay=True)
     for part in ('Double DQN', '3-step returns', 'dueling head', 'up to 4 px', 'prioritized'):
         assert part in full.describe()
