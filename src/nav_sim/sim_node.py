@@ -11,7 +11,6 @@ goes (``PERIOD_PHASES``).  With ``live_port`` it serves a Foxglove live view
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import json
 import math
 import time
@@ -21,7 +20,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -35,13 +34,13 @@ from nav_sim.config import (
     PARAMETER_TYPES,
     NodeConfig,
     SimConfig,
-    convert,
     normalise_split,
     realtime_period_ns,
     validate_seed,
 )
 from nav_sim.errors import ConfigError, NavSimError
 from nav_sim.lockstep import spin_lockstep
+from nav_sim.node_params import converted, declare_settings, warn_unknown_overrides
 from nav_sim.sim import EVENT_NONE, NavSim, WheelCommand, twist_to_wheels
 from nav_sim.sim_process import READY_MESSAGE
 from nav_sim.step_timing import StepTiming
@@ -59,9 +58,9 @@ class SimNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         """Declare the parameters, load the world and create the topics and services."""
         super().__init__(interface.NODE_NAME, **kwargs)
-        sim_values = self._declare(SimConfig, read_only=True)
-        node_values = self._declare(NodeConfig, read_only=False)
-        self._warn_unknown_overrides()
+        sim_values = declare_settings(self, SimConfig)
+        node_values = declare_settings(self, NodeConfig, dynamic=DYNAMIC)
+        warn_unknown_overrides(self, PARAMETER_TYPES, 'config/sim.yaml')
         self.settings = NodeConfig(**node_values)
         sim_config = SimConfig(**sim_values)
         realtime_period_ns(sim_config.ctrl_dt, self.settings.realtime_rate)  # a timer can run it
@@ -90,44 +89,6 @@ class SimNode(Node):
             f'{self.sim.world.path}')
 
     # --- set-up ---------------------------------------------------------------------------
-    def _declare(self, config_type: type, read_only: bool) -> dict[str, Any]:
-        """Declare a parameter per field; a given value (params file, ``-p``) is converted.
-
-        A double parameter needs a value with a decimal point (``1.0``, not ``1``), as ROS 2
-        requires of a params file; a value of another type that converts without loss (``'4'``
-        for an integer) is taken; any other raises ConfigError naming the parameter and the
-        type it takes.
-        """
-        values = {}
-        for field in dataclasses.fields(config_type):
-            fixed = read_only or (config_type is NodeConfig and field.name not in DYNAMIC)
-            descriptor = ParameterDescriptor(description=field.metadata['help'],
-                                             read_only=fixed)
-            value = field.default
-            given = self._parameter_overrides.get(field.name)  # rclpy has no public getter
-            if given is not None:
-                kind = type(field.default)
-                if kind is float and type(given.value) is int:
-                    raise ConfigError(f'parameter {field.name} takes a double: write '
-                                      f'{given.value}.0, not {given.value}')
-                try:
-                    value = convert(field.name, type(field.default), given.value)
-                except ConfigError as exc:
-                    raise ConfigError(f'parameter {exc}') from None
-            values[field.name] = self.declare_parameter(field.name, value, descriptor,
-                                                        ignore_override=True).value
-        return values
-
-    def _warn_unknown_overrides(self) -> None:
-        """Warn about each given parameter this node does not declare (a typo in a params file)."""
-        for name in sorted(self._parameter_overrides):
-            if self.has_parameter(name):
-                continue
-            close = difflib.get_close_matches(name, PARAMETER_TYPES, n=1)
-            hint = f' (did you mean {close[0]}?)' if close else ''
-            self.get_logger().warn(f'unknown parameter {name!r} ignored{hint}; the parameters '
-                                   'of nav_sim are listed in config/sim.yaml')
-
     def _create_interfaces(self) -> None:
         self.pub_image = self.create_publisher(Image, interface.IMAGE_TOPIC, qos.OBSERVATION)
         self.pub_info = self.create_publisher(CameraInfo, interface.CAMERA_INFO_TOPIC,
@@ -151,20 +112,8 @@ class SimNode(Node):
 
     # --- parameters -----------------------------------------------------------------------
     def _convert_parameters(self, params: list[Parameter]) -> list[Parameter]:
-        """Give each new value the declared type where that loses nothing (``2`` -> ``2.0``).
-
-        A value that does not convert is passed on unchanged and then refused with a reason.
-        """
-        out = []
-        for param in params:
-            kind = PARAMETER_TYPES.get(param.name)
-            if kind is not None and param.type_ != Parameter.Type.NOT_SET:
-                try:
-                    param = Parameter(param.name, value=convert(param.name, kind, param.value))
-                except ConfigError:
-                    pass
-            out.append(param)
-        return out
+        """Give each new value the declared type where that loses nothing (``2`` -> ``2.0``)."""
+        return converted(params, PARAMETER_TYPES)
 
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
         values = dataclasses.asdict(self.settings)
