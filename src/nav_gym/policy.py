@@ -39,12 +39,6 @@ from nav_sim.errors import ConfigError
 
 POLICIES = ('dqn', 'servo')
 STOP = -1  # the action of a stop command (no usable image): zero velocity
-#: what each decision message carries, in this order (``policy/decision``, a JointState's
-#: names and positions): the action (-1: stop), its cmd_vel, the Q-values (NaN without), the
-#: image's age at the decision (wall clock since it arrived; node clock since its stamp) and the
-#: time to turn it into an action (observation + network; 0 for a repeated decision)
-DECISION_FIELDS = ('action', 'linear', 'angular', 'q_left', 'q_forward', 'q_right',
-                   'image_age_ms', 'stamp_age_ms', 'inference_ms')
 
 
 @dataclass(frozen=True)
@@ -206,7 +200,7 @@ class Command:
         return self.action == STOP
 
     def values(self, stamp_age_s: float) -> list[float]:
-        """Return the decision message's values, in :data:`DECISION_FIELDS` order."""
+        """Return the decision message's values, in ``nav_sim.interface.DECISION_FIELDS`` order."""
         q = self.q_values or ()
         q_values = [float(q[i]) if i < len(q) else math.nan for i in range(len(ACTION_NAMES))]
         return [float(self.action), self.linear, self.angular, *q_values,

@@ -8,7 +8,7 @@ waits for nobody.  The model, the observation and the action come from :mod:`nav
 SIGINT or SIGTERM it publishes a zero Twist before it exits.
 
 Also publishes (relative names) ``policy/decision`` (sensor_msgs/JointState, stamped with the
-decided image's stamp; names and positions as :data:`nav_gym.policy.DECISION_FIELDS`: action,
+decided image's stamp; names and positions as :data:`nav_sim.interface.DECISION_FIELDS`: action,
 cmd_vel, Q-values, image age, inference time), ``policy/observation`` (the 84x84 observation,
 only while someone subscribes) and about once a second ``/diagnostics``: the decision's time
 budget.  Parameters: :class:`nav_gym.policy.PolicyConfig` (``config/policy.yaml``).
@@ -35,20 +35,20 @@ from sensor_msgs.msg import Image, JointState
 
 from nav_gym.errors import PolicyModelError
 from nav_gym.policy import (
-    DECISION_FIELDS,
     PARAMETER_TYPES,
     Command,
     Controller,
     PolicyConfig,
     load_policy,
 )
+from nav_gym.policy_process import READY_MESSAGE
 from nav_sim import interface, qos, ros_msgs
 from nav_sim.errors import ConfigError
+from nav_sim.interface import DECISION_FIELDS
 from nav_sim.node_params import converted, declare_settings, warn_unknown_overrides
 from nav_sim.step_timing import StepTiming
 from nav_sim.stop_request import StopRequest, stop_on_signals
 
-READY_MESSAGE = 'nav_gym policy ready:'  # how the node's start-up log line begins
 DYNAMIC = ('period', 'image_timeout')
 WARN_PERIOD_S = 5.0
 STOP_ACK_S = 1.0    # how long the final zero Twist may take to be acknowledged

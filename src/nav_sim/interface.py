@@ -24,5 +24,11 @@ PARAMETERS_SERVICE = f'{NODE_NAME}/set_parameters'  # rcl_interfaces/SetParamete
 # The policy node (nav_gym.policy_node) subscribes IMAGE_TOPIC and publishes CMD_VEL_TOPIC and
 # these; named here, with the sim's, because the live view's layout and the bags show them too.
 POLICY_NODE_NAME = 'policy_node'
-DECISION_TOPIC = 'policy/decision'  # sensor_msgs/JointState: names = nav_gym.policy fields
+DECISION_TOPIC = 'policy/decision'  # sensor_msgs/JointState: DECISION_FIELDS as names
 POLICY_OBSERVATION_TOPIC = 'policy/observation'  # sensor_msgs/Image, the 84x84 observation
+#: what each decision carries, in this order (the JointState's names and positions): the
+#: action (-1: stop), its cmd_vel, the Q-values (NaN without), the image's age at the decision
+#: (wall clock since it arrived; node clock since its stamp) and the time to turn it into an
+#: action (observation + network; 0 for a repeated decision)
+DECISION_FIELDS = ('action', 'linear', 'angular', 'q_left', 'q_forward', 'q_right',
+                   'image_age_ms', 'stamp_age_ms', 'inference_ms')

@@ -166,6 +166,8 @@ class SimNode(Node):
             response.message = sim_graph.conflict_message(self, sim_graph.sim_nodes(self))
         else:
             response.success, response.message = self.reset_episode()
+            if response.success and self._timer is not None:
+                self._timer.reset()  # realtime: the episode's first period is a whole period
         if not response.success:
             self.get_logger().error(response.message)
         return response

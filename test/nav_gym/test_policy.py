@@ -13,7 +13,6 @@ from helpers import make_tiny_run
 from nav_gym.errors import PolicyModelError
 from nav_gym.observation import image_msg_to_observation
 from nav_gym.policy import (
-    DECISION_FIELDS,
     STOP,
     Controller,
     DQNActor,
@@ -22,6 +21,7 @@ from nav_gym.policy import (
 )
 from nav_gym.train_config import TrainConfig
 from nav_sim.errors import ConfigError
+from nav_sim.interface import DECISION_FIELDS
 
 
 @pytest.fixture(scope='module')

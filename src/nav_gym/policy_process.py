@@ -1,0 +1,45 @@
+"""Start and stop a policy node child process (what ``ros2 run nav_gym policy`` starts)."""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Mapping
+from typing import Any
+
+from nav_gym.policy import PARAMETER_TYPES
+from nav_sim.config import convert
+from nav_sim.paths import package_prefix
+from nav_sim.sim_process import NodeProcess, node_ros_args
+
+#: how the policy node's start-up log line begins (defined here, not in the node's module: a
+#: process that only starts the node need not load rclpy)
+READY_MESSAGE = 'nav_gym policy ready:'
+
+
+def policy_command() -> list[str]:
+    """``<prefix>/lib/nav_gym/policy`` if installed (as ros2run finds it), else ``-m``."""
+    prefix = package_prefix('nav_gym')
+    if prefix is not None:
+        path = prefix / 'lib' / 'nav_gym' / 'policy'
+        if os.access(path, os.X_OK):
+            return [str(path)]
+    return [sys.executable, '-m', 'nav_gym.policy_node']
+
+
+class PolicyProcess(NodeProcess):
+    """A policy node child process in ``namespace`` with ``params`` (``PolicyConfig``'s names).
+
+    ``use_sim_time`` may be given too; every other value is converted to its declared type
+    (``period: 1`` is sent as the double ``1.0``).
+    """
+
+    def __init__(self, namespace: str = '', params: Mapping[str, Any] | None = None,
+                 quiet: bool = True, env: Mapping[str, str] | None = None) -> None:
+        """Start the policy node."""
+        typed = {key: value if key == 'use_sim_time' else convert(key, PARAMETER_TYPES[key],
+                                                                    value)
+                 for key, value in (params or {}).items()}
+        super().__init__(policy_command() + node_ros_args(namespace, typed), 'policy_node',
+                         READY_MESSAGE, quiet, env)
+        self.namespace = namespace
