@@ -69,6 +69,12 @@ class LoopSettings:
     ctrl_dt: float
     max_steps: int
 
+    @classmethod
+    def of(cls, config: TrainConfig, rate: float) -> LoopSettings:
+        """Return the settings of a run's sim and episode limit at ``rate``."""
+        return cls(rate, SimConfig.from_params(config.sim_params).ctrl_dt,
+                   config.max_episode_steps)
+
     @property
     def period(self) -> float:
         """Return the policy's decision period in wall-clock seconds (one sim control period)."""
@@ -175,19 +181,23 @@ def _pose(event: dict[str, Any]) -> tuple[float, float, float]:
 class ClosedLoop:
     """A realtime sim and the policy node at one rate, with the graph that follows them."""
 
-    def __init__(self, run_dir: Path, config: TrainConfig, checkpoint: str,
-                 loop: LoopSettings) -> None:
-        """Start the sim and the policy node (each its own process) in a fresh namespace."""
+    def __init__(self, config: TrainConfig, policy: dict[str, Any], loop: LoopSettings,
+                 sim_params: dict[str, Any] | None = None) -> None:
+        """Start the sim and the policy node (each its own process) in a fresh namespace.
+
+        ``config``: the run's settings (the sim's); ``policy``: the policy node's ``model``
+        and ``policy`` parameters; ``sim_params``: more sim parameters (e.g. ``live_port``).
+        """
         self.namespace = f'/visnav_closed_loop_{os.getpid()}_{loop.rate:g}'.replace('.', '_')
-        sim_params = {**config.sim_params, 'mode': 'realtime', 'realtime_rate': loop.rate,
-                      'publish_clock': True, 'cmd_vel_timeout': loop.timeout}
-        self.sim = SimProcess(self.namespace, params=sim_params)
+        params = {**config.sim_params, 'mode': 'realtime', 'realtime_rate': loop.rate,
+                  'publish_clock': True, 'cmd_vel_timeout': loop.timeout, **(sim_params or {})}
+        self.sim = SimProcess(self.namespace, params=params)
         self.policy: PolicyProcess | None = None
         self.graph: RealtimeGraph | None = None
         try:
             self.policy = PolicyProcess(self.namespace, {
-                'model': str(run_dir / checkpoint), 'period': loop.period,
-                'image_timeout': loop.timeout, 'use_sim_time': True})
+                **policy, 'period': loop.period, 'image_timeout': loop.timeout,
+                'use_sim_time': True})
             self.graph = RealtimeGraph(self.namespace, timeout=max(config.sim_timeout, 10.0))
             self.graph.wait_ready(START_TIMEOUT_S, self.failure)
         except BaseException:
@@ -206,16 +216,23 @@ class ClosedLoop:
             self.policy.stop()
         self.sim.stop()
 
+    def __enter__(self) -> ClosedLoop:
+        """Use as a context manager that stops both processes."""
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        """Stop the graph and both processes."""
+        self.close()
+
 
 def evaluate_rate(run_dir: Path, config: TrainConfig, eval_set: EvalSet, rate: float,
                   out: Path, record: bool, live: Any = None) -> dict[str, Any]:
     """Run one closed-loop set; write its traces (and bag); return its results entry."""
-    sim = SimConfig.from_params(config.sim_params)
-    loop = LoopSettings(rate, sim.ctrl_dt, config.max_episode_steps)
+    loop = LoopSettings.of(config, rate)
     env = config.env_config()
     print(f'closed loop at {rate:g}x real time: decisions every {loop.period:.3f} s '
           f'(wall clock), {len(eval_set.seeds)} episodes', flush=True)
-    loop_graph = ClosedLoop(run_dir, config, str(eval_set.checkpoint), loop)
+    loop_graph = ClosedLoop(config, {'model': str(run_dir / str(eval_set.checkpoint))}, loop)
     graph = loop_graph.graph
     assert graph is not None
     if live is not None:
@@ -250,7 +267,7 @@ def evaluate_rate(run_dir: Path, config: TrainConfig, eval_set: EvalSet, rate: f
         if recorder is not None:
             recorder.close()
         loop_graph.close()
-    latency = {**latency_summary(latencies.sim, latencies.wall, sim.ctrl_dt,
+    latency = {**latency_summary(latencies.sim, latencies.wall, loop.ctrl_dt,
                                  latencies.inference),
                'images_acted_on': len(latencies.sim), 'images_skipped': latencies.skipped}
     return set_entry(eval_set, results, realtime_rate=rate, decision_period_s=loop.period,

@@ -17,7 +17,7 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.qos import HistoryPolicy, QoSProfile
-from rclpy.serialization import serialize_message
+from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image, JointState
 
 from nav_eval.analysis.closed_loop import Decision, Tick
@@ -62,9 +62,13 @@ class RealtimeGraph:
                                  _deep(qos.OBSERVATION))
         node.create_subscription(Image, interface.IMAGE_TOPIC, self._on_image,
                                  _deep(qos.OBSERVATION))
+        # raw: a live view forwards the bytes as they came (rclpy's serialize_message pads
+        # some messages, JointState among them, beyond what CDR readers such as rosbags take)
         self.sub_decisions = node.create_subscription(
-            JointState, interface.DECISION_TOPIC, self._on_decision, _deep(qos.DECISIONS))
-        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10)
+            JointState, interface.DECISION_TOPIC, self._on_decision, _deep(qos.DECISIONS),
+            raw=True)
+        node.create_subscription(DiagnosticArray, '/diagnostics', self._on_diagnostics, 10,
+                                 raw=True)
 
     # --- subscriptions --------------------------------------------------------------------
     def _on_event(self, msg: DiagnosticArray, info: dict[str, Any]) -> None:
@@ -79,8 +83,9 @@ class RealtimeGraph:
         self.images[ros_msgs.stamp_to_ns(msg.header.stamp)] = (msg,
                                                                int(info['source_timestamp']))
 
-    def _on_decision(self, msg: JointState, info: dict[str, Any]) -> None:
+    def _on_decision(self, data: bytes, info: dict[str, Any]) -> None:
         self._received += 1
+        msg = deserialize_message(data, JointState)
         values = dict(zip(msg.name, msg.position, strict=False))
         stamp = ros_msgs.stamp_to_ns(msg.header.stamp)
         published = int(info['source_timestamp'])
@@ -88,11 +93,11 @@ class RealtimeGraph:
         self.decisions.append(Decision(stamp if stamp in self.images or values['action'] >= 0
                                        else None, published, values))
         if self.forward is not None:
-            self.forward(live_topics.DECISION_TOPIC, serialize_message(msg), stamp)
+            self.forward(live_topics.DECISION_TOPIC, data, stamp)
 
-    def _on_diagnostics(self, msg: DiagnosticArray) -> None:
+    def _on_diagnostics(self, data: bytes) -> None:
         if self.forward is not None:
-            self.forward(live_topics.DIAGNOSTICS_TOPIC, serialize_message(msg), None)
+            self.forward(live_topics.DIAGNOSTICS_TOPIC, data, None)
 
     # --- waiting --------------------------------------------------------------------------
     def spin_until(self, done: Callable[[], bool], limit: float) -> bool:
