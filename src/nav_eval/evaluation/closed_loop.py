@@ -53,6 +53,7 @@ from nav_gym.observation import image_msg_to_observation
 from nav_gym.policy_process import PolicyProcess
 from nav_gym.run_dir import BAGS, CLOSED_LOOP, FINAL_MODEL
 from nav_gym.train_config import TrainConfig
+from nav_sim import interface
 from nav_sim.config import SimConfig
 from nav_sim.sim_process import SimProcess
 
@@ -246,7 +247,8 @@ def evaluate_rate(run_dir: Path, config: TrainConfig, eval_set: EvalSet, rate: f
             recorder = open_recorder(
                 out / BAGS / eval_set.name, loop_graph.namespace,
                 lambda: graph.reset(0, 'train', loop.wait)[1].tick.stamp_ns,
-                lambda: True, topics=WITH_POLICY)
+                lambda bag: bag.wait_for(0, loop.wait, (interface.DECISION_TOPIC,)),
+                topics=WITH_POLICY)
             observers.append(BagSceneWriter(recorder, config.sim_params))
         meta = {'set': eval_set.name, 'policy': eval_set.policy,
                 'checkpoint': eval_set.checkpoint, 'realtime_rate': rate}

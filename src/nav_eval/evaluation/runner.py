@@ -183,8 +183,8 @@ def open_recorder(path: Path, namespace: str, warm_up: Any, delivered: Any,
     its publishers; what it publishes before then never reaches the bag.  So the recorder
     starts paused and ``warm_up()`` resets the sim (a warm-up period, not written; it returns
     the reset frame's stamp) until one whole control period has reached the recorder and
-    ``delivered()`` says the commands reach it too; the bag starts after it.  ``options`` go
-    to the :class:`BagRecorder` (e.g. ``topics``).
+    ``delivered(recorder)`` says the commands reach it too; the bag starts after it.
+    ``options`` go to the :class:`BagRecorder` (e.g. ``topics``).
     """
     from nav_eval.recording.bags import PERIOD_TOPICS, SIM_TOPICS
     from nav_eval.recording.recorder import BagRecorder
@@ -198,7 +198,7 @@ def open_recorder(path: Path, namespace: str, warm_up: Any, delivered: Any,
         while time.monotonic() < deadline:
             stamp = warm_up()
             if (recorder.wait_for(stamp, WARM_UP_WAIT_S, (*PERIOD_TOPICS, interface.CLOCK_TOPIC))
-                    and delivered()):
+                    and delivered(recorder)):
                 recorder.start(stamp + 1)
                 return recorder
     recorder.close()
@@ -212,7 +212,7 @@ def _open_recorder(path: Path, env: NavigationEnv, timeout: float = 10.0) -> Any
     # recorder's subscription (the sim's subscription is the other one)
     commands = env.client.pub_cmd
     return open_recorder(path, env.namespace, lambda: env.client.reset(0, 'train')[0].stamp_ns,
-                         lambda: commands.get_subscription_count() >= 2, timeout)
+                         lambda _: commands.get_subscription_count() >= 2, timeout)
 
 
 def env_for_run(config: TrainConfig, record: bool, sim: str = 'embedded') -> NavigationEnv:
