@@ -42,6 +42,7 @@ bench: setup
 	$(PY) benchmarks/bench_env.py
 	$(PY) benchmarks/bench_live.py
 	$(PY) benchmarks/bench_learner.py
+	$(PY) benchmarks/bench_policy.py
 
 lint: setup
 	$(VENV)/bin/ruff check src test benchmarks
