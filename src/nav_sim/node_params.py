@@ -21,9 +21,6 @@ from rclpy.parameter import Parameter
 from nav_sim.config import convert
 from nav_sim.errors import ConfigError
 
-#: parameters every rclpy node declares itself
-ROS_PARAMETERS = ('use_sim_time', 'start_type_description_service')
-
 
 def declare_settings(node: Node, config_type: type, dynamic: Collection[str] = ()
                      ) -> dict[str, Any]:

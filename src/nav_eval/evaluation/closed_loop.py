@@ -105,10 +105,23 @@ def closed_loop_set(rate: float, split: str, seeds: tuple[int, ...],
                    f'{which} seeds', 'dqn', checkpoint, split, seeds)
 
 
+def start_delay(seed: int, loop: LoopSettings) -> float:
+    """Return the wait before an episode's reset: its phase against the policy's timer.
+
+    The reset restarts the sim's period timer; the policy's timer runs on.  Without a wait the
+    phase between them would drift only by the reset's own delay from episode to episode, and
+    every episode would see about the first one's latency.  A wait drawn uniformly from one
+    decision period (seeded by the scenario seed) samples every phase.
+    """
+    return float(np.random.default_rng([29, seed]).uniform(0.0, loop.period))
+
+
 def run_episode(graph: RealtimeGraph, seed: int, split: str, env: EnvConfig,
                 loop: LoopSettings, observers: list[Any]
                 ) -> tuple[Any, dict, np.ndarray, ImageLatencies]:
     """Play one seed in real time; returns its result, trace, frames and latency records."""
+    delay = start_delay(seed, loop)
+    graph.spin_until(lambda: False, delay)  # take messages meanwhile: none piles up
     scenario, first = graph.reset(seed, split, loop.wait)
     reset_ns = first.tick.published_ns
     obs, rgb = image_msg_to_observation(first.image)
@@ -166,6 +179,7 @@ def run_episode(graph: RealtimeGraph, seed: int, split: str, env: EnvConfig,
                                     scenario['initial_distance'], distance,
                                     float(event['path_length']))
     trace = {'seed': seed, 'split': split, 'outcome': result.outcome, 'realtime_rate': loop.rate,
+             'start_delay_s': round(delay, 6),
              'scenario': {k: v for k, v in scenario.items()
                           if k not in ('episode', 'period', 'stamp_ns')},
              'checks': checks, 'steps': steps}
