@@ -36,7 +36,7 @@ from nav_eval.analysis.closed_loop import (
     latency_summary,
 )
 from nav_eval.errors import EvaluationError
-from nav_eval.evaluation.realtime import RealtimeGraph
+from nav_eval.evaluation.realtime import Period, RealtimeGraph
 from nav_eval.evaluation.runner import (
     env_for_run,
     evaluate_set,
@@ -123,7 +123,6 @@ def run_episode(graph: RealtimeGraph, seed: int, split: str, env: EnvConfig,
     delay = start_delay(seed, loop)
     graph.spin_until(lambda: False, delay)  # take messages meanwhile: none piles up
     scenario, first = graph.reset(seed, split, loop.wait)
-    reset_ns = first.tick.published_ns
     obs, rgb = image_msg_to_observation(first.image)
     event = first.tick.event
     info = {'scenario': scenario, 'seed': seed, 'split': split, 'pose': _pose(event),
@@ -143,16 +142,8 @@ def run_episode(graph: RealtimeGraph, seed: int, split: str, env: EnvConfig,
                                   f'evaluation: is a second client using {graph.client.where}?')
         checks['periods_missed'] += int(event['episode_step']) - len(periods)
         periods.append(period)
-        (decision,), races, mismatches = commands_in_effect(
-            [period.tick], graph.decisions, reset_ns, round(loop.timeout * 1e9))
+        decision = _command(graph, period, first, loop, checks)
         commands.append(decision)
-        checks['races'] += races
-        checks['twist_mismatches'] += mismatches
-        action = -1 if decision is None else decision.action
-        checks['stopped_periods'] += action < 0
-        image_stamp = None if decision is None else decision.image_stamp_ns
-        checks['previous_episode_commands'] += (image_stamp is not None
-                                                and image_stamp < first.tick.stamp_ns)
         distance, name = float(event['distance']), str(event['event'])
         terms = reward_terms(previous, distance, name, env)
         previous, reward = distance, float(sum(terms.values()))
@@ -161,13 +152,8 @@ def run_episode(graph: RealtimeGraph, seed: int, split: str, env: EnvConfig,
         truncated = not terminated and int(event['episode_step']) >= loop.max_steps
         obs, rgb = image_msg_to_observation(period.image)
         frames.append(obs)
-        step = {'step': int(event['episode_step']), 'action': action,
-                'action_name': ACTION_NAMES[action] if action >= 0 else STOP_NAME,
-                'reward': round(reward, 6),
-                'reward_terms': {k: round(v, 6) for k, v in terms.items()},
-                'distance': round(distance, 6), 'pose': [round(v, 6) for v in _pose(event)],
-                'event': name, 'q_values': None if decision is None else decision.q_values,
-                'stamp_ns': period.tick.stamp_ns, 'decision_image_stamp_ns': image_stamp}
+        step = _step(period, decision, reward, terms)
+        action = step['action']
         steps.append(step)
         step_info = {**step, 'pose': _pose(event), 'reward_terms': terms}
         for observer in observers:
@@ -191,6 +177,34 @@ def run_episode(graph: RealtimeGraph, seed: int, split: str, env: EnvConfig,
 
 def _pose(event: dict[str, Any]) -> tuple[float, float, float]:
     return float(event['x']), float(event['y']), float(event['yaw'])
+
+
+def _command(graph: RealtimeGraph, period: Period, first: Period, loop: LoopSettings,
+             checks: dict[str, int]) -> Any:
+    """Return the decision in effect in ``period`` (None: a standstill); count the checks."""
+    (decision,), races, mismatches = commands_in_effect(
+        [period.tick], graph.decisions, first.tick.published_ns, round(loop.timeout * 1e9))
+    checks['races'] += races
+    checks['twist_mismatches'] += mismatches
+    checks['stopped_periods'] += decision is None or decision.action < 0
+    stamp = None if decision is None else decision.image_stamp_ns
+    checks['previous_episode_commands'] += stamp is not None and stamp < first.tick.stamp_ns
+    return decision
+
+
+def _step(period: Period, decision: Any, reward: float, terms: dict[str, float]
+          ) -> dict[str, Any]:
+    """Return a period's trace step: the command the sim applied and what followed."""
+    event = period.tick.event
+    action = -1 if decision is None else decision.action
+    return {'step': int(event['episode_step']), 'action': action,
+            'action_name': ACTION_NAMES[action] if action >= 0 else STOP_NAME,
+            'reward': round(reward, 6), 'reward_terms': {k: round(v, 6) for k, v in terms.items()},
+            'distance': round(float(event['distance']), 6),
+            'pose': [round(v, 6) for v in _pose(event)], 'event': str(event['event']),
+            'q_values': None if decision is None else decision.q_values,
+            'stamp_ns': period.tick.stamp_ns,
+            'decision_image_stamp_ns': None if decision is None else decision.image_stamp_ns}
 
 
 class ClosedLoop:
