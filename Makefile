@@ -24,10 +24,11 @@ run: setup
 sweep: setup
 	$(VENV)/bin/visnav-sweep $(ARGS)
 
-# start the sim node as `ros2 run nav_sim sim_node` would and drive one scripted episode;
-# `make demo ARGS=--live` serves it to Foxglove at ws://localhost:8765, at wall-clock pace
+# the policy node drives a realtime sim through one episode at wall-clock pace: the servo
+# baseline, or a trained run with `make demo ARGS='--model runs/NAME'`; `ARGS=--live` serves it
+# to Foxglove at ws://localhost:8765 (nav-sim-demo: the sim alone, a scripted lockstep episode)
 demo: setup
-	$(VENV)/bin/nav-sim-demo $(ARGS)
+	$(VENV)/bin/visnav-demo $(ARGS)
 
 # CI runs this: lint first (ruff: style, quotes, pep257 docstrings), then the tests
 test: lint
@@ -41,6 +42,7 @@ bench: setup
 	$(PY) benchmarks/bench_env.py
 	$(PY) benchmarks/bench_live.py
 	$(PY) benchmarks/bench_learner.py
+	$(PY) benchmarks/bench_policy.py
 
 lint: setup
 	$(VENV)/bin/ruff check src test benchmarks

@@ -63,3 +63,27 @@ def interrupt(process: subprocess.Popen, timeout: float = 15.0) -> tuple[int, st
         process.kill()
         out, err = process.communicate()
     return process.returncode, out + err
+
+
+def make_tiny_run(path, spaces_only: type, steps: int = 32, **settings: object):  # noqa: ANN201
+    """Write a run directory at ``path`` with a tiny model of the default learner; return it.
+
+    ``config.yaml`` holds ``TrainConfig(**settings)``; the model learns ``steps`` steps on an
+    env with only the spaces (no sim) and is saved as ``checkpoints/dqn_<steps>_steps.zip``,
+    then ``steps`` more as ``final_model.zip``: enough for evaluation, reports and the policy
+    node, in seconds.
+    """
+    from nav_gym.learner import learner_class, learner_kwargs, learner_policy
+    from nav_gym.train_config import TrainConfig
+    config = TrainConfig(**settings)
+    (path / 'config.yaml').write_text(config.to_yaml())
+    learner = config.learner()
+    model = learner_class(None, learner)(
+        learner_policy(learner), spaces_only(), buffer_size=64, learning_starts=16, batch_size=8,
+        seed=3, device='cpu', **learner_kwargs(learner, config.gamma))
+    (path / 'checkpoints').mkdir()
+    model.learn(steps)
+    model.save(path / 'checkpoints' / f'dqn_{steps}_steps.zip')
+    model.learn(steps, reset_num_timesteps=False)
+    model.save(path / 'final_model.zip')
+    return path

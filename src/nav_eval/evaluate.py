@@ -17,6 +17,11 @@ A diagnosis, on request only: ``explore_train`` / ``explore_heldout`` play the f
 training's final epsilon (``ExploringDQNPolicy``), into another ``--out`` than ``RUN_DIR/eval``
 so that they never replace the evaluation.  So does ``--sim-params``: the run's policies in
 another world or look (transfer, unseen looks), written to another ``--out``.
+
+``--closed-loop [--realtime-rate 1,4]``: the final model in lockstep and driving a realtime sim
+through the policy node at each rate, on the same seeds (default held-out 201-250; training
+seeds only if ``--train-seeds`` is given), into ``RUN_DIR/eval_closed_loop``
+(:mod:`nav_eval.evaluation.closed_loop`).
 """
 
 from __future__ import annotations
@@ -26,12 +31,20 @@ import time
 from pathlib import Path
 
 from nav_eval.errors import EvaluationError
+from nav_eval.evaluation.closed_loop import DEFAULT_RATES, evaluate_closed_loop
 from nav_eval.evaluation.runner import evaluate, results_markdown
 from nav_eval.evaluation.sets import DEFAULT_SETS, plan_sets
-from nav_eval.seeds import WORKSHOP_HELDOUT, WORKSHOP_TRAIN, parse_seeds, seed_text
+from nav_eval.reporting.closed_loop import closed_loop_latency_table
+from nav_eval.seeds import (
+    CLOSED_LOOP_HELDOUT,
+    WORKSHOP_HELDOUT,
+    WORKSHOP_TRAIN,
+    parse_seeds,
+    seed_text,
+)
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.live_hooks import add_live_argument
-from nav_gym.run_dir import EVAL, FINAL_MODEL, VIDEOS
+from nav_gym.run_dir import CLOSED_LOOP, EVAL, FINAL_MODEL, VIDEOS
 from nav_gym.timing import quiet_learner_threads
 from nav_gym.train_config import coerce
 
@@ -56,8 +69,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument('--sets', default=','.join(DEFAULT_SETS),
                         help=f'comma-separated evaluation sets (default: all of {DEFAULT_SETS}; '
                         'a diagnosis, with --out elsewhere: explore_train, explore_heldout)')
-    parser.add_argument('--train-seeds', default=seed_text(WORKSHOP_TRAIN))
-    parser.add_argument('--heldout-seeds', default=seed_text(WORKSHOP_HELDOUT))
+    parser.add_argument('--train-seeds', help=f'default {seed_text(WORKSHOP_TRAIN)} (with '
+                        '--closed-loop: none)')
+    parser.add_argument('--heldout-seeds', help=f'default {seed_text(WORKSHOP_HELDOUT)} (with '
+                        f'--closed-loop: {seed_text(CLOSED_LOOP_HELDOUT)})')
     parser.add_argument('--checkpoint', default=FINAL_MODEL,
                         help='final model, relative to the run directory')
     parser.add_argument('--early-checkpoint', help='early checkpoint (default: the first '
@@ -70,9 +85,17 @@ def main(argv: list[str] | None = None) -> None:
                         "limit) or '{randomize_look: true}' (docs/worlds.md)")
     parser.add_argument('--video', action='store_true', help='also write MP4 videos of the '
                         "report's representative episodes to RUN_DIR/eval/videos/")
+    parser.add_argument('--closed-loop', action='store_true', help='evaluate the final model '
+                        'in lockstep and in real time (the policy node driving a realtime sim) '
+                        f'on the same seeds, into RUN_DIR/{CLOSED_LOOP}')
+    parser.add_argument('--realtime-rate', type=parse_rates, default=DEFAULT_RATES,
+                        metavar='R[,R...]', help='with --closed-loop: sim seconds per wall-clock '
+                        'second, one closed-loop set per rate (default 1,4)')
     add_live_argument(parser)
     args = parser.parse_args(strip_ros_args(argv))
     quiet_learner_threads()  # the policy's forward passes must not spin against the sim
+    if args.closed_loop:
+        run_command('nav-eval-evaluate', lambda: closed_loop(args))
 
     def body() -> int:
         eval_dir = (args.run_dir / EVAL).resolve()
@@ -81,7 +104,8 @@ def main(argv: list[str] | None = None) -> None:
             raise EvaluationError('--video reads the evaluation where the report does, in '
                                   'RUN_DIR/eval: leave out --out')
         sets = plan_sets(args.run_dir, [s for s in args.sets.split(',') if s],
-                         parse_seeds(args.train_seeds), parse_seeds(args.heldout_seeds),
+                         parse_seeds(args.train_seeds or seed_text(WORKSHOP_TRAIN)),
+                         parse_seeds(args.heldout_seeds or seed_text(WORKSHOP_HELDOUT)),
                          args.checkpoint, args.early_checkpoint)
         if writes_eval and any(s.policy == 'explore' for s in sets):
             raise EvaluationError('the explore sets are a diagnosis, not the evaluation: write '
@@ -104,6 +128,37 @@ def main(argv: list[str] | None = None) -> None:
         return 0
 
     run_command('nav-eval-evaluate', body)
+
+
+def parse_rates(text: str) -> tuple[float, ...]:
+    """Parse realtime rates ``1,4`` (an argparse type): finite numbers above zero."""
+    try:
+        rates = tuple(float(part) for part in text.split(',') if part.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'not a list of numbers: {text!r}') from None
+    if not rates or not all(0.0 < r < float('inf') for r in rates):
+        raise argparse.ArgumentTypeError(f'rates must be numbers above zero, got {text!r}')
+    return rates
+
+
+def closed_loop(args: argparse.Namespace) -> int:
+    """Run ``--closed-loop``: lockstep and real time on the same seeds; print the table."""
+    if args.video:
+        raise EvaluationError('--video shows the lockstep evaluation: leave it out with '
+                              '--closed-loop')
+    seeds = {'heldout': parse_seeds(args.heldout_seeds or seed_text(CLOSED_LOOP_HELDOUT))}
+    if args.train_seeds:
+        seeds = {'train': parse_seeds(args.train_seeds), **seeds}
+    start = time.perf_counter()
+    out = args.out or args.run_dir / CLOSED_LOOP
+    results = evaluate_closed_loop(args.run_dir, seeds, args.realtime_rate, out,
+                                   record=not args.no_record, checkpoint=args.checkpoint,
+                                   live_port=args.live)
+    print(results_markdown(results['sets']))
+    print(closed_loop_latency_table(results['sets']))
+    print(f"evaluated {sum(len(s['seeds']) for s in results['sets'])} episodes in "
+          f'{time.perf_counter() - start:.1f} s; results in {out}')
+    return 0
 
 
 if __name__ == '__main__':

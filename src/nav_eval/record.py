@@ -1,8 +1,8 @@
 """``ros2 run nav_eval record OUTPUT_DIR``: record a running nav_sim graph into an MCAP bag.
 
-Records the nav_sim topics of one namespace (see :mod:`nav_eval.recording.recorder`) until
-Ctrl-C, SIGTERM or ``--duration`` seconds (:mod:`nav_eval.recording.session`), then finishes
-the bag and prints the messages per topic.
+Records the nav_sim topics of one namespace and the decisions of a policy node there (see
+:mod:`nav_eval.recording.recorder`) until Ctrl-C, SIGTERM or ``--duration`` seconds
+(:mod:`nav_eval.recording.session`), then finishes the bag and prints the messages per topic.
 Works with any driver, e.g. a realtime-mode sim teleoperated with ``ros2 topic pub cmd_vel``.
 A ``--ros-args ...`` block (``ros2 run`` may pass one) is accepted and ignored: use
 ``--namespace``.
@@ -11,14 +11,14 @@ A ``--ros-args ...`` block (``ros2 run`` may pass one) is accepted and ignored: 
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 from collections.abc import Sequence
 
 from nav_eval.errors import RecordingError
-from nav_eval.recording.recorder import BagRecorder
-from nav_eval.recording.session import StopRequest, format_counts, wait_until_stopped
+from nav_eval.recording.recorder import WITH_POLICY, BagRecorder
+from nav_eval.recording.session import format_counts, wait_until_stopped
 from nav_gym.cli import strip_ros_args
+from nav_sim.stop_request import StopRequest, stop_on_signals
 
 PROG = 'nav-eval-record'
 
@@ -51,11 +51,10 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run nav_eval record`` and the ``nav-eval-record`` script."""
     options = parse_args(sys.argv[1:] if args is None else args)
-    stop = StopRequest()
-    previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
-    try:
+    with stop_on_signals(StopRequest()) as stop:
         try:
-            recorder = BagRecorder(options.output, options.namespace, node_name='nav_eval_record')
+            recorder = BagRecorder(options.output, options.namespace, node_name='nav_eval_record',
+                                   topics=WITH_POLICY)
         except RecordingError as exc:
             raise SystemExit(f'{PROG}: {exc}') from None
         print(f'{PROG}: recording {recorder.namespace or "/"} into {options.output} '
@@ -73,9 +72,6 @@ def main(args: list[str] | None = None) -> None:
         print(format_counts(recorder.counts), flush=True)
         if failure is not None:
             raise SystemExit(f'{PROG}: {failure}')
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
 
 
 if __name__ == '__main__':

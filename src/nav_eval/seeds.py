@@ -14,6 +14,8 @@ from nav_eval.errors import EvaluationError
 #: the workshop's evaluation (``nav-eval-evaluate``, the main job): training and held-out seeds
 WORKSHOP_TRAIN = tuple(range(101, 111))
 WORKSHOP_HELDOUT = tuple(range(201, 211))
+#: the closed-loop evaluation's default: held-out scenarios, in lockstep and in real time
+CLOSED_LOOP_HELDOUT = tuple(range(201, 251))
 #: a sweep's final evaluation (and the baselines): the training bank and the held-out bank
 TRAIN_BANK = tuple(range(101, 201))
 HELDOUT_BANK = tuple(range(201, 301))

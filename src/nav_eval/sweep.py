@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 
 from nav_eval.seeds import CURVE, HELDOUT_BANK, TRAIN_BANK, seed_text
+from nav_eval.sweeps.cluster import check_cluster
 from nav_eval.sweeps.runner import aggregate, export, run_sweep
 from nav_eval.sweeps.spec import load_spec, spec_from_args
 from nav_gym.cli import run_command, strip_ros_args
@@ -77,6 +78,7 @@ def main(argv: list[str] | None = None) -> None:
         if args.export:
             print(f'sweep summary: {export(*args.export)}')
             return 0
+        check_cluster(args.address)  # within seconds, before anything is written
         if args.resume:
             spec = load_spec(args.resume)
             if args.cpus_per_trial != 2 or args.gpus_per_trial != 0:

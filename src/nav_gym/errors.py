@@ -29,6 +29,10 @@ class TrainConfigError(NavGymError, ValueError):
     """A training configuration value is invalid."""
 
 
+class PolicyModelError(NavGymError, RuntimeError):
+    """The policy node's model cannot be found or read (the message says which and why)."""
+
+
 class DiskFullError(CheckpointError):
     """A save ran out of disk space (the message names the file and the space it needs)."""
 

@@ -25,9 +25,14 @@ ROLLING_EPISODES = 100   # SB3's ep_info_buffer length: the same rolling window 
 class EnvLive(EpisodeObserver):
     """Log one env's resets and steps to a live view."""
 
-    def __init__(self, port: int, sim_params: dict[str, Any] | None = None) -> None:
-        """Start the server on ``port`` and read the arena of the env's sim settings."""
-        self.view = LiveView(port, live_topics.ENV_TOPICS, name='visnav env')
+    def __init__(self, port: int, sim_params: dict[str, Any] | None = None,
+                 topics: tuple[str, ...] = live_topics.ENV_TOPICS) -> None:
+        """Start the server on ``port`` and read the arena of the env's sim settings.
+
+        ``topics``: what the server advertises (a closed-loop evaluation adds the policy
+        node's, :data:`nav_sim.live_topics.CLOSED_LOOP_TOPICS`, sent with :meth:`forward`).
+        """
+        self.view = LiveView(port, topics, name='visnav env')
         super().__init__(sim_params)
         self.stamp_ns = 0
         self._returns: deque[float] = deque(maxlen=ROLLING_EPISODES)
@@ -82,6 +87,10 @@ class EnvLive(EpisodeObserver):
     def log_diagnostics(self, cdr: bytes) -> None:
         """Send a ``/diagnostics`` message (CDR) if a viewer wants it."""
         self.view.log_cdr(live_topics.DIAGNOSTICS_TOPIC, lambda: cdr, self.stamp_ns)
+
+    def forward(self, topic: str, cdr: bytes, stamp_ns: int | None = None) -> None:
+        """Send a graph message (CDR) on one of the advertised topics if a viewer wants it."""
+        self.view.log_cdr(topic, lambda: cdr, self.stamp_ns if stamp_ns is None else stamp_ns)
 
     def close(self) -> None:
         """Stop the server."""

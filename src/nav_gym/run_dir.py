@@ -13,6 +13,8 @@ Training, evaluation, diagnosis, the report and the sweep all name a run's files
                                  traces/<set>/seed_<n>.json + _frames.npz; bags/<set>/ (MCAP);
                                  diagnosis.json, diagnosis.md and figures/; videos/;
                                  curve/<steps>/ (a sweep's evaluation of each checkpoint)
+    RUN/eval_closed_loop/        the closed-loop evaluation: lockstep and real time on the same
+                                 seeds, laid out as eval/ (results.json, traces/, bags/)
     RUN/report/Result.md         the report, with Result.html, figures/ and videos/
 """
 
@@ -52,6 +54,8 @@ DIAGNOSIS_TEXT = 'diagnosis.md'
 FIGURES = 'figures'
 VIDEOS = 'videos'
 CURVE = 'curve'
+# RUN/eval_closed_loop/: the closed-loop evaluation (its own results.json, traces, bags)
+CLOSED_LOOP = 'eval_closed_loop'
 # RUN/report/
 REPORT = 'report'
 REPORT_TEXT = 'Result.md'

@@ -180,6 +180,10 @@ class SimClient:
                 next_check = time.monotonic() + POLL_S
         return True
 
+    def spin_once(self, timeout: float = 0.0) -> None:
+        """Process at most one callback of the client's node, waiting up to ``timeout`` s."""
+        self._executor.spin_once(timeout_sec=timeout)
+
     def _take_observations(self, timeout: float) -> None:
         """Wait up to ``timeout`` s on the observation subscriptions and take what arrived."""
         ws = self._wait_set
@@ -293,12 +297,7 @@ class SimClient:
         # the reset frame does not come, reset again (the same seed gives the same scenario).
         deadline = time.monotonic() + self.timeout
         while True:
-            response = self._call(self.cli_reset, Trigger.Request(), 'reset')
-            if not response.success:
-                if response.message.startswith(sim_graph.CONFLICT):  # the sim sees another
-                    raise SimConflictError(response.message)
-                raise ScenarioError(response.message)
-            scenario = json.loads(response.message)
+            scenario = self.request_reset()
             stamp = int(scenario['stamp_ns'])
             left = deadline - time.monotonic()
             frame = self._wait_frame(lambda f, s=stamp: f.stamp_ns >= s,
@@ -314,6 +313,20 @@ class SimClient:
         if frame.stamp_ns != stamp:
             raise FrameSyncError(f'expected the reset frame {stamp} ns, got {frame.stamp_ns} ns')
         return frame, scenario
+
+    def request_reset(self) -> dict[str, Any]:
+        """Call the sim's ``reset`` service once; return the scenario it loaded (JSON decoded).
+
+        The scenario names the reset frame's ``stamp_ns``, ``episode`` and ``period``; this
+        does not wait for the frame (:meth:`reset` does).  A refusal raises SimConflictError
+        (another sim in the namespace) or ScenarioError.
+        """
+        response = self._call(self.cli_reset, Trigger.Request(), 'reset')
+        if not response.success:
+            if response.message.startswith(sim_graph.CONFLICT):  # the sim sees another
+                raise SimConflictError(response.message)
+            raise ScenarioError(response.message)
+        return json.loads(response.message)
 
     def step(self, linear: float, angular: float, after: Frame) -> Frame:
         """Publish one cmd_vel and return the frame of the control period it caused."""

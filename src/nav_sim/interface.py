@@ -1,4 +1,4 @@
-"""The sim node's ROS 2 interface: its topic and service names (no dependencies, no rclpy).
+"""The graph's ROS 2 interface: the sim node's topic and service names, and the policy node's.
 
 Names are relative, so they resolve in the node's namespace (``ros2 run nav_sim sim_node
 --ros-args -r __ns:=/robot1`` publishes ``/robot1/camera/image_raw``).  One definition shared by
@@ -20,3 +20,15 @@ CLOCK_TOPIC = '/clock'  # rosgraph_msgs/Clock, with publish_clock (global: ROS's
 RESET_SERVICE = 'reset'  # std_srvs/Trigger: a new episode (seed and split from parameters)
 STOP_SERVICE = 'stop'  # std_srvs/Trigger: stop the robot
 PARAMETERS_SERVICE = f'{NODE_NAME}/set_parameters'  # rcl_interfaces/SetParameters
+
+# The policy node (nav_gym.policy_node) subscribes IMAGE_TOPIC and publishes CMD_VEL_TOPIC and
+# these; named here, with the sim's, because the live view's layout and the bags show them too.
+POLICY_NODE_NAME = 'policy_node'
+DECISION_TOPIC = 'policy/decision'  # sensor_msgs/JointState: DECISION_FIELDS as names
+POLICY_OBSERVATION_TOPIC = 'policy/observation'  # sensor_msgs/Image, the 84x84 observation
+#: what each decision carries, in this order (the JointState's names and positions): the
+#: action (-1: stop), its cmd_vel, the Q-values (NaN without), the image's age at the decision
+#: (wall clock since it arrived; node clock since its stamp) and the time to turn it into an
+#: action (observation + network; 0 for a repeated decision)
+DECISION_FIELDS = ('action', 'linear', 'angular', 'q_left', 'q_forward', 'q_right',
+                   'image_age_ms', 'stamp_age_ms', 'inference_ms')

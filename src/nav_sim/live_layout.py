@@ -1,9 +1,11 @@
 """The Foxglove layout shipped as ``config/foxglove/visnav.json``, built with ``foxglove.layouts``.
 
-Two tabs.  **Episode**: the camera image as rendered and the 84x84 observation, the top-down 3D
+Three tabs.  **Episode**: the camera image as rendered and the 84x84 observation, the top-down 3D
 scene (``odom`` frame), the action and episode events, the reward terms, the distance to the goal
 and the Q-values.  **Training and time budget**: step, exploration rate, rolling return and
-success rate, and the ``/diagnostics`` summary (where a step's time goes).
+success rate, and the ``/diagnostics`` summary (where a step's time goes).  **Policy node**: the
+decisions of ``ros2 run nav_gym policy`` (action, Q-values) and their time budget (the image's
+age at each decision, the inference time), live or from a closed-loop evaluation's bag.
 
 Regenerate the file after a change here:
 ``python -m nav_sim.live_layout > config/foxglove/visnav.json`` (a test compares them).
@@ -14,8 +16,10 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from nav_sim.interface import DECISION_FIELDS
 from nav_sim.live_topics import (
     CAMERA_TOPIC,
+    DECISION_TOPIC,
     DIAGNOSTICS_TOPIC,
     OBSERVATION_TOPIC,
     ODOM_FRAME,
@@ -28,6 +32,8 @@ from nav_sim.live_topics import (
 #: topics of the layout that exist only live: training statistics and /diagnostics (the time
 #: budget).  Every other topic of the layout is also in the evaluation bags.
 LIVE_ONLY_TOPICS = (TRAINING_TOPIC, DIAGNOSTICS_TOPIC)
+#: the policy node's topics (:data:`nav_sim.live_topics.POLICY_TOPICS`) are on their own tab: a
+#: lockstep evaluation's bag has none, a closed-loop evaluation's bag has them
 _TOPIC_KEYS = ('topic', 'imageTopic', 'value', 'topicToRender')
 
 
@@ -112,7 +118,28 @@ def build_layout() -> object:
         direction='column')
     return fl.Layout(content=fl.TabContainer(tabs=[
         fl.TabItem(title='Episode', content=episode),
-        fl.TabItem(title='Training and time budget', content=training)]))
+        fl.TabItem(title='Training and time budget', content=training),
+        fl.TabItem(title='Policy node', content=_policy_tab(fl, row))]))
+
+
+def _decision(field: str) -> str:
+    """Return the message path of one of the decision's values (its JointState position)."""
+    return f'{DECISION_TOPIC}.position[{DECISION_FIELDS.index(field)}]'
+
+
+def _policy_tab(fl: object, row: object) -> object:
+    """Build the policy node's tab: its decisions and their time budget."""
+    decisions = _plot(fl, 'policy decisions: action (-1 stop) and Q-values', [
+        (_decision('action'), 'action'), (_decision('q_left'), 'Q left'),
+        (_decision('q_forward'), 'Q forward'), (_decision('q_right'), 'Q right')])
+    command = _plot(fl, 'cmd_vel (m/s, rad/s)', [(_decision('linear'), 'linear'),
+                                                  (_decision('angular'), 'angular')])
+    budget = _plot(fl, 'decision time budget (ms)', [
+        (_decision('image_age_ms'), 'image age (since it arrived)'),
+        (_decision('stamp_age_ms'), 'image age (since its stamp, node clock)'),
+        (_decision('inference_ms'), 'observation + network')])
+    return row((1.0, row((1.0, decisions), (1.0, command), direction='row')),
+               (1.0, budget), direction='column')
 
 
 def layout_json() -> str:

@@ -38,12 +38,14 @@ ROBOT_TOPIC = '/visnav/robot'
 OBSERVATION_TOPIC = '/visnav/observation'
 STEP_TOPIC = '/visnav/step'
 TRAINING_TOPIC = '/visnav/training'
+DECISION_TOPIC = f'/{interface.DECISION_TOPIC}'  # the policy node's decisions
 
 IMAGE_TYPE = 'sensor_msgs/msg/Image'
 DIAGNOSTIC_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
 STEP_TYPE = 'visnav_msgs/msg/EnvStep'
 TRAINING_TYPE = 'visnav_msgs/msg/TrainingStats'
+DECISION_TYPE = 'sensor_msgs/msg/JointState'  # named numbers with a header: what Foxglove plots
 
 #: topic -> ROS 2 type, for every topic a live view may advertise
 TOPIC_TYPES = {
@@ -55,12 +57,17 @@ TOPIC_TYPES = {
     OBSERVATION_TOPIC: IMAGE_TYPE,
     STEP_TOPIC: STEP_TYPE,
     TRAINING_TOPIC: TRAINING_TYPE,
+    DECISION_TOPIC: DECISION_TYPE,
 }
 #: what a standalone sim node's live view serves
 SIM_TOPICS = (CAMERA_TOPIC, EVENT_TOPIC, DIAGNOSTICS_TOPIC, SCENE_TOPIC, ROBOT_TOPIC)
 #: what a trainer's or evaluator's live view serves (it sees the sim through its env)
 ENV_TOPICS = (CAMERA_TOPIC, DIAGNOSTICS_TOPIC, SCENE_TOPIC, ROBOT_TOPIC, OBSERVATION_TOPIC,
               STEP_TOPIC, TRAINING_TOPIC)
+#: what only a graph with the policy node has (the closed-loop evaluation, the demo, a robot)
+POLICY_TOPICS = (DECISION_TOPIC,)
+#: what the closed-loop evaluation's (and the demo's) live view serves
+CLOSED_LOOP_TOPICS = (*ENV_TOPICS, *POLICY_TOPICS)
 
 ENV_STEP_MSG = """\
 builtin_interfaces/Time stamp

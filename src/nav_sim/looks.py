@@ -10,7 +10,7 @@ model.  The invariants (docs/worlds.md):
   always gives the same look, so the same bytes in every image.
 - **The goal's hue is reserved.**  A colour takes the goal's hue when green is its greatest
   channel (hue strictly between 60 and 180 degrees: :func:`green_excess` > 0), which is what
-  the goal detector looks for (``nav_eval.analysis.failure_layers.goal_mask``: green above red
+  the goal detector looks for (``nav_gym.servo.goal_mask``: green above red
   and blue).  Drawn hues lie outside that range (180 to 420 degrees: cyan, blue, magenta, red,
   orange, yellow) and the light stays white, so no drawn surface takes it; the goal's own
   material is never changed.

@@ -20,3 +20,13 @@ LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 CLOCK = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                    reliability=ReliabilityPolicy.RELIABLE,
                    durability=DurabilityPolicy.VOLATILE)
+#: camera images for a consumer that must not slow the camera down (the policy node): best
+#: effort, only the newest matters (ROS's sensor-data profile with depth 1); it matches the
+#: sim's reliable publisher as well as a real camera driver's best-effort one
+SENSOR_DATA = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.BEST_EFFORT,
+                         durability=DurabilityPolicy.VOLATILE)
+#: the policy node's decisions (for plots, bags and the closed-loop evaluation)
+DECISIONS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                       reliability=ReliabilityPolicy.RELIABLE,
+                       durability=DurabilityPolicy.VOLATILE)

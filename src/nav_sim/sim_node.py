@@ -11,7 +11,6 @@ goes (``PERIOD_PHASES``).  With ``live_port`` it serves a Foxglove live view
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import json
 import math
 import time
@@ -21,7 +20,7 @@ import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Twist
 from nav_msgs.msg import Odometry
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -35,7 +34,6 @@ from nav_sim.config import (
     PARAMETER_TYPES,
     NodeConfig,
     SimConfig,
-    convert,
     normalise_split,
     realtime_period_ns,
     validate_seed,
@@ -48,6 +46,7 @@ from nav_sim.errors import (
     WorldNotFoundError,
 )
 from nav_sim.lockstep import spin_lockstep
+from nav_sim.node_params import converted, declare_settings, given, warn_unknown_overrides
 from nav_sim.sim import EVENT_NONE, NavSim, WheelCommand, twist_to_wheels
 from nav_sim.sim_process import ERROR_PREFIX, READY_MESSAGE
 from nav_sim.step_timing import StepTiming
@@ -65,9 +64,9 @@ class SimNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         """Declare the parameters, load the world and create the topics and services."""
         super().__init__(interface.NODE_NAME, **kwargs)
-        sim_values = self._declare(SimConfig, read_only=True, defaults=self._world_defaults())
-        node_values = self._declare(NodeConfig, read_only=False)
-        self._warn_unknown_overrides()
+        sim_values = declare_settings(self, SimConfig, defaults=self._world_defaults())
+        node_values = declare_settings(self, NodeConfig, dynamic=DYNAMIC)
+        warn_unknown_overrides(self, PARAMETER_TYPES, 'config/sim.yaml')
         self.settings = NodeConfig(**node_values)
         sim_config = SimConfig(**sim_values)
         realtime_period_ns(sim_config.ctrl_dt, self.settings.realtime_rate)  # a timer can run it
@@ -96,57 +95,10 @@ class SimNode(Node):
             f'{self.sim.world.path}')
 
     # --- set-up ---------------------------------------------------------------------------
-    def _declare(self, config_type: type, read_only: bool,
-                 defaults: dict[str, Any] | None = None) -> dict[str, Any]:
-        """Declare a parameter per field; a given value (params file, ``-p``) is converted.
-
-        A double parameter needs a value with a decimal point (``1.0``, not ``1``), as ROS 2
-        requires of a params file; a value of another type that converts without loss (``'4'``
-        for an integer) is taken; any other raises ConfigError naming the parameter and the
-        type it takes.  A parameter not given takes its value from ``defaults`` (the world's
-        settings), else the field's default.
-        """
-        values = {}
-        for field in dataclasses.fields(config_type):
-            fixed = read_only or (config_type is NodeConfig and field.name not in DYNAMIC)
-            descriptor = ParameterDescriptor(description=field.metadata['help'],
-                                             read_only=fixed)
-            value = (defaults or {}).get(field.name, field.default)
-            given = self._given(field)
-            if given is not None:
-                value = given
-            values[field.name] = self.declare_parameter(field.name, value, descriptor,
-                                                        ignore_override=True).value
-        return values
-
-    def _given(self, field: dataclasses.Field) -> Any:
-        """Return the value given for a field's parameter, converted (None: not given)."""
-        given = self._parameter_overrides.get(field.name)  # rclpy has no public getter
-        if given is None:
-            return None
-        kind = type(field.default)
-        if kind is float and type(given.value) is int:
-            raise ConfigError(f'parameter {field.name} takes a double: write '
-                              f'{given.value}.0, not {given.value}')
-        try:
-            return convert(field.name, kind, given.value)
-        except ConfigError as exc:
-            raise ConfigError(f'parameter {exc}') from None
-
     def _world_defaults(self) -> dict[str, Any]:
         """Return the sim parameters the chosen world sets (its ``visnav:`` settings)."""
-        world = self._given(next(f for f in dataclasses.fields(SimConfig) if f.name == 'world'))
+        world = given(self, next(f for f in dataclasses.fields(SimConfig) if f.name == 'world'))
         return SimConfig.world_defaults(world if world is not None else SimConfig.world)
-
-    def _warn_unknown_overrides(self) -> None:
-        """Warn about each given parameter this node does not declare (a typo in a params file)."""
-        for name in sorted(self._parameter_overrides):
-            if self.has_parameter(name):
-                continue
-            close = difflib.get_close_matches(name, PARAMETER_TYPES, n=1)
-            hint = f' (did you mean {close[0]}?)' if close else ''
-            self.get_logger().warn(f'unknown parameter {name!r} ignored{hint}; the parameters '
-                                   'of nav_sim are listed in config/sim.yaml')
 
     def _create_interfaces(self) -> None:
         self.pub_image = self.create_publisher(Image, interface.IMAGE_TOPIC, qos.OBSERVATION)
@@ -171,20 +123,8 @@ class SimNode(Node):
 
     # --- parameters -----------------------------------------------------------------------
     def _convert_parameters(self, params: list[Parameter]) -> list[Parameter]:
-        """Give each new value the declared type where that loses nothing (``2`` -> ``2.0``).
-
-        A value that does not convert is passed on unchanged and then refused with a reason.
-        """
-        out = []
-        for param in params:
-            kind = PARAMETER_TYPES.get(param.name)
-            if kind is not None and param.type_ != Parameter.Type.NOT_SET:
-                try:
-                    param = Parameter(param.name, value=convert(param.name, kind, param.value))
-                except ConfigError:
-                    pass
-            out.append(param)
-        return out
+        """Give each new value the declared type where that loses nothing (``2`` -> ``2.0``)."""
+        return converted(params, PARAMETER_TYPES)
 
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
         values = dataclasses.asdict(self.settings)
@@ -237,6 +177,8 @@ class SimNode(Node):
             response.message = sim_graph.conflict_message(self, sim_graph.sim_nodes(self))
         else:
             response.success, response.message = self.reset_episode()
+            if response.success and self._timer is not None:
+                self._timer.reset()  # realtime: the episode's first period is a whole period
         if not response.success:
             self.get_logger().error(response.message)
         return response

@@ -1,4 +1,4 @@
-"""Start and stop a ``sim_node`` child process (what ``ros2 run nav_sim sim_node`` does)."""
+"""Start and stop node child processes: ``sim_node`` (what ``ros2 run nav_sim sim_node`` does)."""
 
 from __future__ import annotations
 
@@ -42,25 +42,39 @@ def typed_params(params: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def executable_command() -> list[str]:
-    """``<prefix>/lib/nav_sim/sim_node`` if installed (as ros2run finds it), else ``-m``."""
-    prefix = package_prefix('nav_sim')
+def node_command(package: str, executable: str, module: str) -> list[str]:
+    """``<prefix>/lib/PACKAGE/EXECUTABLE`` if installed (as ros2run finds it), else ``-m``."""
+    prefix = package_prefix(package)
     if prefix is not None:
-        path = prefix / 'lib' / 'nav_sim' / 'sim_node'
+        path = prefix / 'lib' / package / executable
         if os.access(path, os.X_OK):
             return [str(path)]
-    return [sys.executable, '-m', 'nav_sim.sim_node']
+    return [sys.executable, '-m', module]
+
+
+def executable_command() -> list[str]:
+    """Return the sim node's command (``lib/nav_sim/sim_node`` if installed, else ``-m``)."""
+    return node_command('nav_sim', 'sim_node', 'nav_sim.sim_node')
 
 
 def ros_args(namespace: str = '', params: Mapping[str, Any] | None = None,
              params_file: str | None = None) -> list[str]:
-    """``--ros-args`` for a namespace, a params file and single parameters."""
+    """``--ros-args`` for a namespace, a params file and single sim_node parameters."""
+    return node_ros_args(namespace, typed_params(params or {}), params_file)
+
+
+def node_ros_args(namespace: str = '', params: Mapping[str, Any] | None = None,
+                  params_file: str | None = None) -> list[str]:
+    """``--ros-args`` for any node: a namespace, a params file and typed single parameters.
+
+    A float is always written with a '.' or an exponent, so ROS reads it as a double.
+    """
     args = ['--ros-args']
     if namespace:
         args += ['-r', f'__ns:={namespace}']
     if params_file:
         args += ['--params-file', params_file]
-    for key, value in typed_params(params or {}).items():
+    for key, value in (params or {}).items():
         if isinstance(value, bool):
             text = str(value).lower()
         elif isinstance(value, float):
@@ -90,25 +104,29 @@ def child_preexec() -> None:
         ctypes.CDLL(None, use_errno=True).prctl(1, ctypes.c_ulong(signal.SIGTERM))  # PDEATHSIG
 
 
-class SimProcess:
-    """A sim_node child process; ``stop()`` sends SIGINT and always reaps it."""
+class NodeProcess:
+    """A ROS node child process; ``stop()`` sends SIGINT and always reaps it."""
 
-    def __init__(self, namespace: str = '', params: Mapping[str, Any] | None = None,
-                 params_file: str | None = None, quiet: bool = True,
+    def __init__(self, command: list[str], name: str, ready_message: str, quiet: bool = True,
                  env: Mapping[str, str] | None = None) -> None:
-        """Start sim_node in ``namespace`` with ``params`` and a ``params_file``.
+        """Start ``command``, a node called ``name`` that logs ``ready_message`` once started.
 
         ``quiet`` keeps the node's output in a temporary file (for ``failure`` and ``ready``).
         """
-        command = executable_command() + ros_args(namespace, params, params_file)
-        # quiet: keep its output (log and errors) in a temporary file to explain a failed start
+        self.name = name
+        self.ready_message = ready_message
         self._log = tempfile.TemporaryFile() if quiet else None
-        self.process = subprocess.Popen(command, stdout=self._log,
-                                        stderr=self._log,
+        self.process = subprocess.Popen(command, stdout=self._log, stderr=self._log,
                                         env=dict(env) if env is not None else None,
                                         preexec_fn=child_preexec)
-        self.namespace = namespace
         self._ready = False
+
+    def output(self) -> str:
+        """Return what the node has printed so far ('' without ``quiet``)."""
+        if self._log is None:
+            return ''
+        fd = self._log.fileno()  # pread: the child shares the offset, which must stay put
+        return os.pread(fd, os.fstat(fd).st_size, 0).decode(errors='replace')
 
     def failure(self) -> str | None:
         """None while the process runs; else its exit code and why.
@@ -118,14 +136,11 @@ class SimProcess:
         code = self.process.poll()
         if code is None:
             return None
-        tail = ''
-        if self._log is not None:
-            self._log.seek(0)
-            lines = self._log.read().decode(errors='replace').strip().splitlines()
-            errors = [line.removeprefix(ERROR_PREFIX) for line in lines
-                      if line.startswith(ERROR_PREFIX)]
-            tail = ': ' + ' | '.join(errors or lines[-5:]) if lines else ''
-        return f'sim_node exited with code {code}{tail}'
+        lines = self.output().strip().splitlines()
+        errors = [line.removeprefix(ERROR_PREFIX) for line in lines
+                  if line.startswith(ERROR_PREFIX)]
+        tail = ': ' + ' | '.join(errors or lines[-5:]) if lines else ''
+        return f'{self.name} exited with code {code}{tail}'
 
     def ready(self) -> bool:
         """Tell whether the node has logged that it finished starting.
@@ -135,9 +150,7 @@ class SimProcess:
         if self._log is None:
             return self.alive()
         if not self._ready and self.process.poll() is None:
-            # pread: the child shares the file offset, which must stay where it writes
-            fd = self._log.fileno()
-            self._ready = READY_MESSAGE.encode() in os.pread(fd, os.fstat(fd).st_size, 0)
+            self._ready = self.ready_message in self.output()
         return self._ready
 
     def alive(self) -> bool:
@@ -158,10 +171,22 @@ class SimProcess:
             self._log = None
         return self.process.returncode
 
-    def __enter__(self) -> SimProcess:
+    def __enter__(self) -> NodeProcess:
         """Use as a context manager that stops the process."""
         return self
 
     def __exit__(self, *exc: object) -> None:
         """Stop the process."""
         self.stop()
+
+
+class SimProcess(NodeProcess):
+    """A sim_node child process (what ``ros2 run nav_sim sim_node`` starts)."""
+
+    def __init__(self, namespace: str = '', params: Mapping[str, Any] | None = None,
+                 params_file: str | None = None, quiet: bool = True,
+                 env: Mapping[str, str] | None = None) -> None:
+        """Start sim_node in ``namespace`` with ``params`` and a ``params_file``."""
+        super().__init__(executable_command() + ros_args(namespace, params, params_file),
+                         'sim_node', READY_MESSAGE, quiet, env)
+        self.namespace = namespace

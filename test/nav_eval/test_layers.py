@@ -9,6 +9,7 @@ import pytest
 
 from nav_eval.analysis import failure_layers as layers
 from nav_eval.analysis.diagnosis import diagnose
+from nav_gym import servo
 from nav_gym.config import EnvConfig
 from nav_sim.config import SimConfig
 
@@ -64,8 +65,8 @@ def servo_actions(start=(0.0, 0.0, 0.4), n=30):
     trace, frames = episode([], start=start)
     actions, pose = [], list(start)
     for _ in range(n):
-        band = layers.centre_band(TURN, math.radians(SIM.camera_hfov_deg))
-        want = layers.servo_action(layers.goal_bearing(frame(pose)), band)
+        band = servo.centre_band(TURN, math.radians(SIM.camera_hfov_deg))
+        want = servo.servo_action(servo.goal_bearing(frame(pose)), band)
         a = 0 if want is None else want
         actions.append(a)
         trace, frames = episode(actions, start=start)
@@ -74,10 +75,10 @@ def servo_actions(start=(0.0, 0.0, 0.4), n=30):
 
 
 def test_goal_bearing_and_servo():
-    assert layers.goal_bearing(frame((0, 0, 0))) == pytest.approx(0.0, abs=0.05)
-    assert layers.goal_bearing(frame((0, 0, 0.3))) > 0.2      # goal to the right in the image
-    assert layers.goal_bearing(frame((0, 0, math.pi))) is None  # behind the robot
-    assert layers.servo_action(-0.5) == 0 and layers.servo_action(0.0) == 1
+    assert servo.goal_bearing(frame((0, 0, 0))) == pytest.approx(0.0, abs=0.05)
+    assert servo.goal_bearing(frame((0, 0, 0.3))) > 0.2      # goal to the right in the image
+    assert servo.goal_bearing(frame((0, 0, math.pi))) is None  # behind the robot
+    assert servo.servo_action(-0.5) == 0 and servo.servo_action(0.0) == 1
 
 
 def test_a_healthy_episode_has_no_broken_layer():

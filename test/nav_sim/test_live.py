@@ -32,11 +32,14 @@ def test_shipped_layout_is_the_generated_one_and_names_known_topics():
             live_topics.ROBOT_TOPIC, live_topics.STEP_TOPIC, live_topics.TRAINING_TOPIC,
             live_topics.DIAGNOSTICS_TOPIC} <= topics
     assert topics <= set(live_topics.TOPIC_TYPES)
-    assert topics <= set(live_topics.ENV_TOPICS)  # a trainer/evaluator serves all of them
-    # the live-only topics are on the training tab; the episode tab replays from a bag
-    episode_tab, training_tab = shipped['content']['tabs']
-    assert not referenced_topics(episode_tab) & set(LIVE_ONLY_TOPICS)
+    # a trainer/evaluator serves all of them; the closed-loop evaluation also the policy's
+    assert topics <= set(live_topics.CLOSED_LOOP_TOPICS)
+    # the live-only topics are on the training tab; the episode tab replays from a bag; the
+    # policy node's on their own tab (only a graph with the policy node has them)
+    episode_tab, training_tab, policy_tab = shipped['content']['tabs']
+    assert not referenced_topics(episode_tab) & set(LIVE_ONLY_TOPICS + live_topics.POLICY_TOPICS)
     assert set(LIVE_ONLY_TOPICS) <= referenced_topics(training_tab)
+    assert referenced_topics(policy_tab) == set(live_topics.POLICY_TOPICS)
 
 
 def test_scene_of_an_episode_round_trips_through_cdr():

@@ -10,7 +10,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from nav_eval.analysis.failure_layers import goal_mask
+from nav_gym.servo import goal_mask
 from nav_sim.config import SimConfig
 from nav_sim.looks import BANDS, bands_of, draw_look, green_excess, hue_band
 from nav_sim.sim import NavSim

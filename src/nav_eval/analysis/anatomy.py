@@ -7,7 +7,7 @@ share of decisions taken with the goal in view, how many of them drive forward, 
 the policy reverses between left and right).  A time-out whose goal came into view late is a
 search failure; one that saw the goal most of the time and reversed all along is an approach
 failure.  The goal is "in view" in an observation when the diagnosis's goal-marker mask
-(:func:`nav_eval.analysis.failure_layers.goal_mask`) has at least ``MIN_PIXELS`` pixels: more
+(:func:`nav_gym.servo.goal_mask`) has at least ``MIN_PIXELS`` pixels: more
 than the diagnosis needs to place a bearing, so that a sliver at the image edge does not count
 as found.
 
@@ -27,10 +27,10 @@ from typing import Any
 
 import numpy as np
 
-from nav_eval.analysis.failure_layers import goal_mask
 from nav_eval.analysis.metrics import OUTCOMES
 from nav_gym.actions import ACTION_NAMES
 from nav_gym.run_dir import frames_path
+from nav_gym.servo import goal_mask
 from nav_sim.geometry import ArenaGeometry, Layout, ObstacleShape, Placement, clearance
 
 MIN_PIXELS = 10  # fewer green pixels than this is noise at the image edge, not the goal

@@ -7,7 +7,6 @@ episode, and names the earliest layer that looks broken or suspect.
 
 from __future__ import annotations
 
-import math
 from dataclasses import asdict
 from pathlib import Path
 from typing import Any
@@ -17,6 +16,7 @@ import numpy as np
 from nav_eval.analysis import failure_layers as layers
 from nav_gym.config import EnvConfig
 from nav_gym.run_dir import MONITOR, read_monitor, truthy
+from nav_gym.servo import servo_band
 from nav_sim.config import SimConfig
 
 
@@ -48,8 +48,7 @@ def diagnose(trace: dict, frames: np.ndarray, sim: SimConfig, env: EnvConfig,
                              layers.arc_chord(env.turn_speed, env.turn_rate, sim.ctrl_dt)),
         layers.check_reward(steps, scenario['initial_distance'], weights),
         layers.check_policy(steps, frames, trace['outcome'], training,
-                            layers.centre_band(env.turn_rate * sim.ctrl_dt,
-                                               math.radians(sim.camera_hfov_deg))),
+                            servo_band(env.turn_rate, sim.ctrl_dt, sim.camera_hfov_deg)),
         layers.check_evaluation(trace, eval_config, run_config, rerun_actions),
     ]
     earliest = next((v for v in verdicts if v.status in ('broken', 'suspect')), None)

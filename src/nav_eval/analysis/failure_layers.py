@@ -19,6 +19,7 @@ import numpy as np
 
 from nav_gym.actions import ACTION_NAMES
 from nav_gym.run_dir import EVAL_SETTINGS
+from nav_gym.servo import goal_bearing, servo_action
 
 LAYERS = ('visual observation', 'action timing', 'reward', 'training / exploration',
           'evaluation')
@@ -43,21 +44,6 @@ class LayerVerdict:
     def note(self, text: str) -> None:
         """Add evidence that changes no verdict."""
         self.evidence.append(text)
-
-
-def goal_mask(obs: np.ndarray) -> np.ndarray:
-    """Pixels of the green goal marker in a (3, H, W) observation."""
-    r, g, b = (obs[i].astype(np.int16) for i in range(3))
-    return (g > 120) & (g - r > 60) & (g - b > 60)
-
-
-def goal_bearing(obs: np.ndarray, min_pixels: int = 2) -> float | None:
-    """Horizontal position of the goal in the image, -1 (left edge) .. +1 (right edge)."""
-    mask = goal_mask(obs)
-    if int(mask.sum()) < min_pixels:
-        return None
-    columns = np.nonzero(mask)[1]
-    return float(columns.mean() / (obs.shape[2] - 1) * 2.0 - 1.0)
 
 
 def check_observations(frames: np.ndarray, steps: Sequence[dict]) -> LayerVerdict:
@@ -202,24 +188,6 @@ def check_reward(steps: Sequence[dict], initial_distance: float,
     if sums['progress'] > 0 and net <= 0:
         v.flag('broken', 'progress reward is positive while the distance did not fall')
     return v
-
-
-def centre_band(turn_step: float, hfov: float) -> float:
-    """Return the half-width of 'centred' in bearing units: a bit over half a turn step.
-
-    A turn cannot centre the goal better than that.
-    """
-    return min(0.9, 1.2 * turn_step / hfov)
-
-
-def servo_action(bearing: float | None, band: float = 0.3) -> int | None:
-    """Return what a visual servo would do: turn toward a visible goal, drive when centred.
-
-    Centred means ``|bearing| <= band``; None when the goal is not in view.
-    """
-    if bearing is None:
-        return None
-    return 0 if bearing < -band else (2 if bearing > band else 1)
 
 
 def check_policy(steps: Sequence[dict], frames: np.ndarray, outcome: str,

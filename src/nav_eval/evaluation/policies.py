@@ -15,9 +15,9 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from nav_eval.analysis.failure_layers import centre_band, goal_bearing, servo_action
 from nav_eval.errors import EvaluationError
 from nav_gym.actions import action_twists
+from nav_gym.servo import servo_act, servo_band
 from nav_sim.planner import Planner
 from nav_sim.scenarios import build_banks, sample_scenario
 from nav_sim.world import load_arena
@@ -74,7 +74,7 @@ class ServoPolicy:
     def for_actions(cls, turn_rate: float, control_period: float,
                     hfov_deg: float) -> ServoPolicy:
         """Make a servo whose 'centred' band fits one turn step of these actions and camera."""
-        return cls(centre_band(turn_rate * control_period, math.radians(hfov_deg)))
+        return cls(servo_band(turn_rate, control_period, hfov_deg))
 
     def begin_episode(self, seed: int) -> None:
         """Start an episode (the servo keeps no state)."""
@@ -82,8 +82,7 @@ class ServoPolicy:
 
     def act(self, observation: np.ndarray) -> tuple[int, list[float] | None]:
         """Steer toward the goal's bearing in the image; turn left while it is not in view."""
-        action = servo_action(goal_bearing(observation), self.band)
-        return (0 if action is None else action), None
+        return servo_act(observation, self.band), None
 
 
 class DQNPolicy:

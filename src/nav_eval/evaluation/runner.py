@@ -137,40 +137,60 @@ def evaluate_set(env: NavigationEnv, run_dir: Path, eval_set: EvalSet, out: Path
         scene_writer = BagSceneWriter(recorder, env.config.sim_params)
         env.observers.append(scene_writer)
     results = []
+    meta = {'set': eval_set.name, 'policy': eval_set.policy,
+            'checkpoint': eval_set.checkpoint, **exploration}
     try:
         for seed in eval_set.seeds:
             result, trace, frames = run_episode(env, policy, seed, eval_set.split, recorder)
             results.append(result)
-            meta = {'set': eval_set.name, 'policy': eval_set.policy,
-                    'checkpoint': eval_set.checkpoint, **exploration}
-            trace = {**meta, **trace}
-            trace_file = trace_path(out, eval_set.name, seed)
-            trace_file.write_text(json.dumps(trace, indent=1))
-            np.savez_compressed(frames_path(trace_file), obs=frames)
-            if recorder is not None:
-                recorder.annotate({**meta, **result.to_dict()})
-            print(f'  {eval_set.name:<14} seed {seed:>4}: {result.outcome:<9} '
-                  f'{result.length:>4} steps  return {result.episode_return:+7.3f}  '
-                  f'SPL {result.spl:.3f}', flush=True)
+            write_episode(out, meta, result, trace, frames, recorder)
     finally:
         if scene_writer is not None:
             env.observers.remove(scene_writer)
         if recorder is not None:
             recorder.close()
+    return set_entry(eval_set, results, **exploration)
+
+
+def write_episode(out: Path, meta: dict[str, Any], result: metrics.EpisodeResult,
+                  trace: dict[str, Any], frames: np.ndarray, recorder: Any = None) -> None:
+    """Write an episode's trace and frames, annotate its bag and print its line.
+
+    ``meta`` names the set (``set``, ``policy``, ``checkpoint``, ...); the trace goes to
+    ``traces/<set>/seed_<n>.json`` under ``out``, its observations beside it.
+    """
+    trace = {**meta, **trace}
+    trace_file = trace_path(out, meta['set'], result.seed)
+    trace_file.parent.mkdir(parents=True, exist_ok=True)
+    trace_file.write_text(json.dumps(trace, indent=1))
+    np.savez_compressed(frames_path(trace_file), obs=frames)
+    if recorder is not None:
+        recorder.annotate({**meta, **result.to_dict()})
+    print(f"  {meta['set']:<14} seed {result.seed:>4}: {result.outcome:<9} "
+          f'{result.length:>4} steps  return {result.episode_return:+7.3f}  '
+          f'SPL {result.spl:.3f}', flush=True)
+
+
+def set_entry(eval_set: EvalSet, results: list[metrics.EpisodeResult],
+              **extra: Any) -> dict[str, Any]:
+    """Return a set's entry of ``results.json``: what ran, its summary and its episodes."""
     summary = metrics.summarize(results)
     return {'name': eval_set.name, 'label': eval_set.label, 'policy': eval_set.policy,
-            'checkpoint': eval_set.checkpoint, **exploration, 'split': eval_set.split,
+            'checkpoint': eval_set.checkpoint, **extra, 'split': eval_set.split,
             'seeds': list(eval_set.seeds), 'summary': summary.to_dict(),
             'episodes': [r.to_dict() for r in results]}
 
 
-def _open_recorder(path: Path, env: NavigationEnv, timeout: float = 10.0) -> Any:
-    """Return a bag recorder on the env's sim that the sim is known to deliver to.
+def open_recorder(path: Path, namespace: str, warm_up: Any, delivered: Any,
+                  timeout: float = 10.0, **options: Any) -> Any:
+    """Return a bag recorder on the sim in ``namespace`` that the sim is known to deliver to.
 
     The sim can match the recorder's subscriptions some time after the recorder has matched
     its publishers; what it publishes before then never reaches the bag.  So the recorder
-    starts paused and the sim is reset (a warm-up period, not written) until one whole
-    control period has reached the recorder; the bag starts after it.
+    starts paused and ``warm_up()`` resets the sim (a warm-up period, not written; it returns
+    the reset frame's stamp) until one whole control period has reached the recorder and
+    ``delivered(recorder)`` says the commands reach it too; the bag starts after it.
+    ``options`` go to the :class:`BagRecorder` (e.g. ``topics``).
     """
     from nav_eval.recording.bags import PERIOD_TOPICS, SIM_TOPICS
     from nav_eval.recording.recorder import BagRecorder
@@ -178,22 +198,27 @@ def _open_recorder(path: Path, env: NavigationEnv, timeout: float = 10.0) -> Any
         shutil.rmtree(path)  # a re-run replaces the bag of the same set
     path.parent.mkdir(parents=True, exist_ok=True)
     # root names: the bag's topics are those of the live view and the Foxglove layout
-    recorder = BagRecorder(path, namespace=env.namespace, paused=True, root_names=True)
+    recorder = BagRecorder(path, namespace=namespace, paused=True, root_names=True, **options)
     deadline = time.monotonic() + timeout
-    # cmd_vel is the env's own publisher: it delivers to the recorder once it has matched the
-    # recorder's subscription (the sim's subscription is the other one)
-    commands = env.client.pub_cmd
     if recorder.wait_for_publishers(timeout, (*SIM_TOPICS, interface.CMD_VEL_TOPIC)):
         while time.monotonic() < deadline:
-            frame, _ = env.client.reset(0, 'train')
-            if (recorder.wait_for(frame.stamp_ns, WARM_UP_WAIT_S,
-                                  (*PERIOD_TOPICS, interface.CLOCK_TOPIC))
-                    and commands.get_subscription_count() >= 2):
-                recorder.start(frame.stamp_ns + 1)
+            stamp = warm_up()
+            if (recorder.wait_for(stamp, WARM_UP_WAIT_S, (*PERIOD_TOPICS, interface.CLOCK_TOPIC))
+                    and delivered(recorder)):
+                recorder.start(stamp + 1)
                 return recorder
     recorder.close()
     raise EvaluationError(f'the bag recorder could not connect to nav_sim in '
-                          f'{env.namespace} within {timeout} s')
+                          f'{namespace} within {timeout} s')
+
+
+def _open_recorder(path: Path, env: NavigationEnv, timeout: float = 10.0) -> Any:
+    """Return a bag recorder on the env's sim (:func:`open_recorder`)."""
+    # cmd_vel is the env's own publisher: it delivers to the recorder once it has matched the
+    # recorder's subscription (the sim's subscription is the other one)
+    commands = env.client.pub_cmd
+    return open_recorder(path, env.namespace, lambda: env.client.reset(0, 'train')[0].stamp_ns,
+                         lambda _: commands.get_subscription_count() >= 2, timeout)
 
 
 def env_for_run(config: TrainConfig, record: bool, sim: str = 'embedded') -> NavigationEnv:
@@ -233,9 +258,14 @@ def evaluate(run_dir: Path, sets: list[EvalSet], out: Path | None = None,
         entries = [evaluate_set(env, run_dir, s, out, record) for s in sets]
     finally:
         env.close()
+    return write_results(out, run_dir, config, entries)
+
+
+def write_results(out: Path, run_dir: Path, config: TrainConfig, entries: list[dict[str, Any]],
+                  **extra: Any) -> dict[str, Any]:
+    """Write ``results.json``, ``results.md`` and ``episodes.csv`` under ``out``; return them."""
     results = {'run_dir': str(run_dir), 'arena': arena_description(config.sim_params),
-               'config': eval_settings(config),
-               'sets': entries}
+               'config': eval_settings(config), **extra, 'sets': entries}
     (out / RESULTS).write_text(json.dumps(results, indent=1))
     (out / RESULTS_TABLE).write_text(results_markdown(entries))
     (out / EPISODES_CSV).write_text(metrics.episodes_csv(

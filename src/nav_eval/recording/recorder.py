@@ -12,6 +12,11 @@ drives it, and writes the CDR bytes unchanged, each under its fully resolved top
     /clock                    rosgraph_msgs/msg/Clock
     /visnav/episode           std_msgs/msg/String (only written by :meth:`BagRecorder.annotate`)
 
+and, with ``topics=WITH_POLICY`` (the closed-loop evaluation, ``nav-eval-record``), what the
+policy node (``ros2 run nav_gym policy``) publishes besides ``cmd_vel``:
+
+    <ns>/policy/decision      sensor_msgs/msg/JointState (stamped with the decided image's stamp)
+
 The bag is rosbag2 version 9 (what Jazzy writes); ``metadata.yaml`` appears when the recorder is
 closed.  Bag timestamps are sim time, so a recording of a seeded run is reproducible: the header
 stamp (the Clock's value on ``/clock``) of every stamped message; for ``cmd_vel``, which has no
@@ -64,7 +69,7 @@ from rosbags.interfaces import (
 )
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer, WriterError
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from nav_eval.errors import RecordingError
 from nav_eval.recording.bags import (
@@ -113,6 +118,9 @@ TOPICS = (
     RecordedTopic(interface.CMD_VEL_TOPIC, 'geometry_msgs/msg/Twist', Twist, qos.CONTROL, False),
     RecordedTopic(interface.CLOCK_TOPIC, 'rosgraph_msgs/msg/Clock', Clock, qos.CLOCK, True),
 )
+#: the sim's topics and the policy node's decisions
+WITH_POLICY = (*TOPICS, RecordedTopic(interface.DECISION_TOPIC, 'sensor_msgs/msg/JointState',
+                                      JointState, qos.DECISIONS, True))
 
 
 def bag_qos(profile: QoSProfile) -> Qos:
@@ -140,12 +148,14 @@ class BagRecorder:
 
     def __init__(self, path: str | Path, namespace: str = '', *,
                  node_name: str = 'visnav_recorder', queue_depth: int = QUEUE_DEPTH,
-                 paused: bool = False, root_names: bool = False) -> None:
-        """Create the bag at ``path`` (which must not exist) and start recording.
+                 paused: bool = False, root_names: bool = False,
+                 topics: tuple[RecordedTopic, ...] = TOPICS) -> None:
+        """Create the bag at ``path`` (which must not exist) and start recording ``topics``.
 
         ``paused`` notes messages without writing them until :meth:`start`; ``root_names``
         writes the graph topics under root-namespace names instead of their resolved ones.
         """
+        self.topics = topics
         self.path = Path(path)
         # root_names: write the graph topics as if the sim ran in the root namespace
         # (camera/image_raw -> /camera/image_raw), the names the live view and the shipped
@@ -198,7 +208,7 @@ class BagRecorder:
         node = self._node = rclpy.create_node(node_name, namespace=self.namespace or '/',
                                               context=self._context,
                                               start_parameter_services=False, enable_rosout=False)
-        for topic in TOPICS:
+        for topic in self.topics:
             name = ('/' + topic.name.lstrip('/') if self.root_names
                     else node.resolve_topic_name(topic.name))
             connection = self._add_connection(name, topic.msgtype, [bag_qos(topic.profile)])

@@ -7,27 +7,14 @@ when every per-period topic arrives, and print the messages per topic at the end
 
 from __future__ import annotations
 
-import signal
 import time
-from types import FrameType
 
 from nav_eval.recording.bags import PERIOD_TOPICS
 from nav_eval.recording.recorder import BagRecorder
+from nav_sim.stop_request import StopRequest
 
 TICK_S = 0.1
 NOTICE_S = 5.0
-
-
-class StopRequest:
-    """Set by SIGINT/SIGTERM; a flag, so the handler can interrupt nothing mid-way."""
-
-    def __init__(self) -> None:
-        """Start with no signal received."""
-        self.signal_name: str | None = None
-
-    def __call__(self, signum: int, frame: FrameType | None) -> None:
-        """Note the signal's name (the signal handler)."""
-        self.signal_name = signal.Signals(signum).name
 
 
 def wait_until_stopped(recorder: BagRecorder, stop: StopRequest,

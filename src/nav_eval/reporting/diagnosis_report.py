@@ -14,7 +14,6 @@ from typing import Any
 
 import numpy as np
 
-from nav_eval.analysis import failure_layers as layers
 from nav_eval.analysis.diagnosis import diagnose, training_evidence
 from nav_eval.evaluation.runner import rerun
 from nav_eval.evaluation.selection import load_episode, pick_episode
@@ -29,6 +28,7 @@ from nav_gym.run_dir import (
     RESULTS,
     eval_settings,
 )
+from nav_gym.servo import goal_bearing
 from nav_sim.config import SimConfig
 
 
@@ -38,7 +38,7 @@ def step_table(trace: dict, frames: np.ndarray) -> str:
             '| distance | Q(left, fwd, right) | event |', '|---:|---|---|---:|---:|---:|---:|'
             '---:|---|---|']
     for i, s in enumerate(trace['steps']):
-        bearing = layers.goal_bearing(frames[i])
+        bearing = goal_bearing(frames[i])
         t = s['reward_terms']
         q = ', '.join(f'{v:+.2f}' for v in s['q_values']) if s.get('q_values') else '-'
         rows.append(f"| {s['step']} | {s['action']} {s['action_name']} | "
@@ -71,7 +71,7 @@ def trace_figure(trace: dict, frames: np.ndarray, out: Path) -> Path:
         axes[1].step(x, actions, where='mid', color='k', label='action')
         axes[1].set_yticks([0, 1, 2], ACTION_NAMES)
     axes[1].legend(loc='upper right', fontsize=8)
-    bearings = [layers.goal_bearing(frames[i]) for i in range(len(steps))]
+    bearings = [goal_bearing(frames[i]) for i in range(len(steps))]
     axes[2].plot(x, [math.nan if b is None else b for b in bearings], '.', color='tab:green')
     axes[2].axhline(0, color='grey', lw=0.5)
     axes[2].set_ylim(-1.05, 1.05)

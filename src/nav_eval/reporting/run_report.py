@@ -1,7 +1,8 @@
 """A run's result report (Markdown + self-contained HTML) with its figures and videos.
 
 Reads what the other commands left in RUN_DIR (validation.json, summary.json, monitor.csv,
-checkpoints/, eval/results.json, eval/traces/, eval/diagnosis.*) and writes
+checkpoints/, eval/results.json, eval/traces/, eval/diagnosis.*, eval_closed_loop/results.json)
+and writes
 RUN_DIR/report/Result.md, RUN_DIR/report/Result.html, RUN_DIR/report/figures/*.png and the
 rollout videos RUN_DIR/report/videos/*.mp4 (:mod:`nav_eval.reporting.videos`).  Every section is
 written; one whose input is missing says which command produces it.
@@ -23,6 +24,7 @@ import yaml
 from nav_eval.errors import DiagnosisError, ReportError
 from nav_eval.evaluation.selection import pick_episode
 from nav_eval.reporting import plots, videos
+from nav_eval.reporting.closed_loop import section_closed_loop
 from nav_eval.reporting.format import (
     IMAGE_RE,
     details,
@@ -37,6 +39,7 @@ from nav_eval.reporting.format import (
     video_link,
 )
 from nav_gym.run_dir import (
+    CLOSED_LOOP,
     CONFIG,
     DIAGNOSIS,
     DIAGNOSIS_TEXT,
@@ -84,6 +87,7 @@ class Run:
     config: dict[str, Any] | None = None
     validation: list[dict[str, Any]] | None = None
     results: dict[str, Any] | None = None
+    closed_loop: dict[str, Any] | None = None
     diagnosis: dict[str, Any] | None = None
     problems: list[str] = field(default_factory=list)
 
@@ -121,6 +125,7 @@ def load_run(run_dir: Path) -> Run:
     run.config = (run.summary or {}).get('config') or run.read(CONFIG)
     run.validation = run.read(VALIDATION)
     run.results = run.read(f'{EVAL}/{RESULTS}')
+    run.closed_loop = run.read(f'{CLOSED_LOOP}/{RESULTS}')
     run.diagnosis = run.read(f'{EVAL}/{DIAGNOSIS}')
     return run
 
@@ -534,7 +539,8 @@ def build_markdown(run: Run, experiments: Path | None, commands: list[str] | Non
 
     A section whose input is malformed says so instead of failing the report.
     """
-    bodies = (section_checks, section_training, section_early, section_evaluation,
+    bodies = (section_checks, section_training, section_early,
+              lambda r: section_evaluation(r) + section_closed_loop(r.closed_loop, r.shown),
               lambda r: section_trajectories(r) + section_videos(r), section_diagnosis,
               lambda r: section_experiments(r, experiments),
               lambda r: ['```bash', *(commands or default_commands(r, experiments)), '```', ''])

@@ -303,6 +303,11 @@ def _markdown(folder: Path, data: dict[str, Any], figures: dict[str, str]) -> st
     if 'improvement' in data and data['improvement']:
         rows = [[k.replace(',', ' > '), _ci(v, 0)] for k, v in data['improvement'].items()]
         lines += table(['P(X > Y), held-out success', 'estimate [95 % CI]'], rows)
+    if data.get('improvement_collisions'):
+        rows = [[k.replace(',', ' > '), _ci(v, 0)]
+                for k, v in data['improvement_collisions'].items()]
+        lines += table(['P(X > Y), held-out episodes without a collision (1 - collision rate)',
+                        'estimate [95 % CI]'], rows)
     lines += ['## Per seed', '']
     head = ['Configuration', 'Trial', 'Seed', 'Steps']
     for split in ('train', 'heldout'):
@@ -441,6 +446,10 @@ def write_sweep_report(folder: Path) -> Path:
                for c, m in groups.items() if any('heldout' in t['final'] for t in m)}
     if len(success) > 1:
         data['improvement'] = stats.probability_of_improvement(success)
+        no_collision = {c: stats.score_matrix(
+            [1.0 - t['final']['heldout']['summary']['collision_rate'] for t in m
+             if 'heldout' in t['final']]) for c in success for m in [groups[c]]}
+        data['improvement_collisions'] = stats.probability_of_improvement(no_collision)
     figures = write_figures(folder / SWEEP_FIGURES, data, success, curves)
     data['sample_efficiency'] = {c: {'steps': v['steps'], 'seeds': v['seeds'],
                                      'iqm': v['iqm'], 'low': v['low'], 'high': v['high']}

@@ -219,8 +219,12 @@ def headline(trial: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def run_trial(trial: dict[str, Any], report: Callable[[dict[str, Any]], None]) -> None:
-    """Run every remaining stage of one trial, then ``report`` its headline figures."""
+def run_trial(trial: dict[str, Any], report: Callable[[dict[str, Any]], None],
+              node: str = '') -> None:
+    """Run every remaining stage of one trial, then ``report`` its headline figures.
+
+    ``node``: the address of the Ray node the trial runs on (in its log and its report).
+    """
     log = Path(trial['log'])
     log.parent.mkdir(parents=True, exist_ok=True)
     start = time.monotonic()
@@ -228,7 +232,7 @@ def run_trial(trial: dict[str, Any], report: Callable[[dict[str, Any]], None]) -
         env = child_environment(domain.environment(), trial['cpus'])
         with open(log, 'ab') as handle:
             handle.write(f'\n# attempt at {time.strftime("%Y-%m-%d %H:%M:%S")}, '
-                         f'ROS_DOMAIN_ID={domain.domain_id}\n'.encode())
+                         f'ROS_DOMAIN_ID={domain.domain_id}, node {node or "?"}\n'.encode())
         if trial['kind'] == 'baseline':
             command = baseline_command(trial)
             if command is not None:
@@ -239,5 +243,5 @@ def run_trial(trial: dict[str, Any], report: Callable[[dict[str, Any]], None]) -
             if command is not None:
                 run_child(command, env, log, f"trial {trial['name']} (training and evaluation)")
         figures = headline(trial)
-    report({**figures, 'domain_id': domain.domain_id, 'pid': os.getpid(),
+    report({**figures, 'domain_id': domain.domain_id, 'pid': os.getpid(), 'node': node,
             'trial_wall_s': round(time.monotonic() - start, 1), 'complete': True})

@@ -38,8 +38,9 @@ class Outcome:
 
 
 def trainable(config: dict[str, Any]) -> None:
-    """Run one trial (the Tune function trainable)."""
-    run_trial(config['trial'], tune.report)
+    """Run one trial (the Tune function trainable) on the node Ray placed it on."""
+    import ray
+    run_trial(config['trial'], tune.report, node=ray.util.get_node_ip_address())
 
 
 def _name(trial: Any) -> str:
