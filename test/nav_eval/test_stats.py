@@ -75,11 +75,24 @@ def test_same_random_state_same_results_and_the_global_generator_is_untouched():
 def test_probability_of_improvement_and_bank_estimates():
     better, worse = stats.score_matrix([0.8, 0.9, 0.85]), stats.score_matrix([0.2, 0.3, 0.25])
     poi = stats.probability_of_improvement({'x': better, 'y': worse}, reps=REPS)
-    assert poi['x,y']['point'] == pytest.approx(1.0)
-    assert poi['y,x']['point'] == pytest.approx(0.0)
+    assert poi['x > y']['point'] == pytest.approx(1.0)
+    assert poi['y > x']['point'] == pytest.approx(0.0)
     episodes = [{'outcome': 'success'}] * 3 + [{'outcome': 'collision'}]
     bank = stats.mean_estimates({'train': stats.outcome_scores(episodes)}, reps=REPS)['train']
     assert bank['point'] == pytest.approx(0.75) and bank['low'] <= 0.75 <= bank['high']
+
+
+def test_configuration_names_with_commas_keep_their_pairs_and_figure(tmp_path):
+    # a grid over worlds names configurations by every setting that differs: "a=1, b=2"
+    from nav_eval.sweeps.figures import write_figures
+    scores = {'max_episode_steps=120, world=clutter.xml': stats.score_matrix([0.9, 0.95]),
+              'max_episode_steps=200, world=rooms.xml': stats.score_matrix([0.6, 0.7])}
+    improvement = stats.probability_of_improvement(scores, reps=200)
+    assert set(improvement) == {
+        'max_episode_steps=120, world=clutter.xml > max_episode_steps=200, world=rooms.xml',
+        'max_episode_steps=200, world=rooms.xml > max_episode_steps=120, world=clutter.xml'}
+    figures = write_figures(tmp_path, {'aggregates': {}, 'improvement': improvement}, scores, {})
+    assert (tmp_path / figures['improvement']).is_file()
 
 
 def test_bank_verdict():

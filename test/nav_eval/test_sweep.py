@@ -135,8 +135,8 @@ def test_aggregate_a_folder_of_runs_with_two_configurations(finished, tmp_path):
                                          'turn_speed=0.02': ['b1', 'b2']}
     report = (tmp_path / 'Sweep.md').read_text()
     assert '## Probability of improvement' in report
-    assert set(results['improvement']) == {'turn_speed=0.03,turn_speed=0.02',
-                                           'turn_speed=0.02,turn_speed=0.03'}
+    assert set(results['improvement']) == {'turn_speed=0.03 > turn_speed=0.02',
+                                           'turn_speed=0.02 > turn_speed=0.03'}
     # and the same pairs on collisions: P(X has fewer), as 1 - collision rate
     assert set(results['improvement_collisions']) == set(results['improvement'])
     assert 'episodes without a collision (1 - collision rate)' in report

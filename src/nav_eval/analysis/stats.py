@@ -137,6 +137,10 @@ def performance_profile(scores: Mapping[str, np.ndarray], taus: np.ndarray, reps
                                               confidence_interval_size=CONFIDENCE)
 
 
+#: how a pair's key reads, 'X > Y' (a configuration's name may hold commas: "a=1, b=2")
+PAIR_SEPARATOR = ' > '
+
+
 def improvement_pairs(keys: Sequence[str]) -> list[tuple[str, str]]:
     """Return every ordered pair (X, Y) of different configurations, X before Y."""
     return list(itertools.permutations(keys, 2))
@@ -144,8 +148,9 @@ def improvement_pairs(keys: Sequence[str]) -> list[tuple[str, str]]:
 
 def probability_of_improvement(scores: Mapping[str, np.ndarray], reps: int = 2_000,
                                seed: int = RANDOM_STATE) -> dict[str, dict[str, float]]:
-    """Compute P(X > Y) with its CI for every ordered pair: ``{'X,Y': estimate}``."""
-    pairs = {f'{x},{y}': [scores[x], scores[y]] for x, y in improvement_pairs(list(scores))}
+    """Compute P(X > Y) with its CI for every ordered pair: ``{'X > Y': estimate}``."""
+    pairs = {f'{x}{PAIR_SEPARATOR}{y}': [scores[x], scores[y]]
+             for x, y in improvement_pairs(list(scores))}
     if not pairs:
         return {}
     with seeded(seed):

@@ -81,6 +81,7 @@ def _improvement(folder: Path, improvement: dict[str, Any]) -> str:
     points = {k: v['point'] for k, v in improvement.items()}
     intervals = {k: np.array([v['low'], v['high']]) for k, v in improvement.items()}
     fig = plot_utils.plot_probability_of_improvement(points, intervals,
+                                                     pair_separator=stats.PAIR_SEPARATOR,
                                                      figsize=(5, 0.5 + 0.4 * len(points)))
     return _save(fig if hasattr(fig, 'savefig') else fig.figure, folder,
                  'probability_of_improvement.png')

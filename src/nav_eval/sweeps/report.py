@@ -301,11 +301,10 @@ def _markdown(folder: Path, data: dict[str, Any], figures: dict[str, str]) -> st
         if key in figures:
             lines += [f'## {caption}', '', f'![{caption}]({figures[key]})', '']
     if 'improvement' in data and data['improvement']:
-        rows = [[k.replace(',', ' > '), _ci(v, 0)] for k, v in data['improvement'].items()]
+        rows = [[k, _ci(v, 0)] for k, v in data['improvement'].items()]
         lines += table(['P(X > Y), held-out success', 'estimate [95 % CI]'], rows)
     if data.get('improvement_collisions'):
-        rows = [[k.replace(',', ' > '), _ci(v, 0)]
-                for k, v in data['improvement_collisions'].items()]
+        rows = [[k, _ci(v, 0)] for k, v in data['improvement_collisions'].items()]
         lines += table(['P(X > Y), held-out episodes without a collision (1 - collision rate)',
                         'estimate [95 % CI]'], rows)
     lines += ['## Per seed', '']
