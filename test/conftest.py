@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import itertools
 import os
+import signal
 import sys
 
 import pytest
@@ -17,6 +18,12 @@ os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 os.environ.setdefault('MUJOCO_GL', 'egl')
+# The tests press Ctrl-C on commands as a terminal does.  Started as a background job of a
+# non-interactive shell (`nohup make test &`), this process inherits an ignored SIGINT and so
+# would every command it starts: a trainer started so ignores Ctrl-C (Python installs no
+# KeyboardInterrupt handler), which is right for it and wrong for these tests.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 _names = itertools.count()
 
