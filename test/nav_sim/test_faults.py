@@ -103,6 +103,10 @@ def test_an_idle_lockstep_sim_sleeps_yet_answers_at_once(namespace):
     try:
         with SimClient(namespace, timeout=15.0) as client:
             client.wait_for_sim(60.0)
+            # an answer comes from its executor: the start-up (world, first render) is over, and
+            # its CPU is not counted as idle (the sim is discoverable before that)
+            ready = AsyncParameterClient(client.node, 'sim_node').get_parameters(['seed'])
+            assert client.spin_until(ready.done, 30.0), 'the sim never answered'
         # no client: nothing to do for the sim
         before, start_time = cpu_seconds(process.pid), time.monotonic()
         end = start_time + 3.0
