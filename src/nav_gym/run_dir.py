@@ -42,6 +42,8 @@ REPLAY_BUFFER_STEP = 'replay_buffer.step'
 #: what only a run directory holds (one of them is enough to call a folder a run)
 RUN_MARKERS = (SUMMARY, CONFIG, MONITOR)
 CHECKPOINT_RE = re.compile(r'dqn_(\d+)_steps\.zip$')
+#: the command that continues an interrupted run (followed by its directory)
+RESUME_COMMAND = 'nav-gym-train --resume'
 # RUN/eval/
 EVAL = 'eval'
 RESULTS = 'results.json'

@@ -44,6 +44,7 @@ from nav_gym.run_dir import (
     MONITOR,
     REPLAY_BUFFER,
     REPLAY_BUFFER_STEP,
+    RESUME_COMMAND,
     SUMMARY,
     TENSORBOARD,
     checkpoint_path,
@@ -54,7 +55,6 @@ from nav_gym.timing import EnvTimer, quiet_learner_threads
 from nav_gym.train_config import LearnerSpec, TrainConfig
 from nav_sim.errors import NavSimError
 
-RESUME_COMMAND = 'nav-gym-train --resume'
 #: fault injection for the test suite: the name of a file whose save pauses (before the
 #: rename) until a signal arrives, once per process
 PAUSE_SAVE_ENV = 'VISNAV_TEST_PAUSE_SAVE'

@@ -142,6 +142,32 @@ def test_aggregate_a_folder_of_runs_with_two_configurations(finished, tmp_path):
     assert 'episodes without a collision (1 - collision rate)' in report
 
 
+def test_the_report_names_the_command_that_completes_each_missing_trial(finished, tmp_path):
+    folder, result = finished
+    assert result.returncode == 0, explain(result)
+    copy = tmp_path / 's'
+    shutil.copytree(folder, copy, ignore=shutil.ignore_patterns('tune', 'checkpoints', 'tb'))
+    runs = tmp_path / 'runs'
+    for seed in (1, 2):
+        shutil.copytree(copy / 'trials' / f'seed{seed}', runs / f'seed{seed}')
+    # seed1: training interrupted (no final model, no evaluation); seed2: not evaluated
+    for base in (copy / 'trials', runs):
+        (base / 'seed1' / 'final_model.zip').unlink()
+        shutil.rmtree(base / 'seed1' / 'eval')
+        (base / 'seed2' / 'eval' / 'results.json').unlink()
+    for target in (copy, runs):
+        done = sweep('--aggregate', str(target), timeout=300)
+        assert done.returncode == 0, explain(done)
+    missing = json.loads((copy / 'results.json').read_text())['missing']
+    assert missing == [f'seed1: training unfinished; run `visnav-sweep --resume {copy}`',
+                       f'seed2: no final evaluation; run `visnav-sweep --resume {copy}`']
+    first, second = json.loads((runs / 'results.json').read_text())['missing']
+    assert first == (f'seed1: training unfinished; run `nav-gym-train --resume {runs}/seed1`, '
+                     'then evaluate it')
+    assert second.startswith(f'seed2: no final evaluation; run `nav-eval-evaluate {runs}/seed2 ')
+    assert '## Missing' in (runs / 'Sweep.md').read_text()
+
+
 def test_bad_settings_are_one_line_errors(tmp_path):
     for args, words in ((['--grid', 'nonsense=1,2'], 'unknown setting'),
                         (['--grid', 'turn_speed='], 'bad setting'),

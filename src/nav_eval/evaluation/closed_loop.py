@@ -41,6 +41,7 @@ from nav_eval.evaluation.runner import (
     env_for_run,
     evaluate_set,
     open_recorder,
+    output_dir,
     set_entry,
     write_episode,
     write_results,
@@ -315,12 +316,7 @@ def evaluate_closed_loop(run_dir: Path, seeds: dict[str, tuple[int, ...]],
     ``RUN/eval_closed_loop``).
     """
     config = run_config(run_dir)
-    out = out or run_dir / CLOSED_LOOP
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise EvaluationError(f'cannot create the output directory {out} ({exc.strerror}); '
-                              'choose another --out') from None
+    out = output_dir(out or run_dir / CLOSED_LOOP)
     if not (run_dir / checkpoint).is_file():
         raise EvaluationError(f'checkpoint {run_dir / checkpoint} not found; finish (or '
                               '--resume) the training run first')

@@ -231,6 +231,16 @@ def env_for_run(config: TrainConfig, record: bool, sim: str = 'embedded') -> Nav
                                            sim_params=sim_params))
 
 
+def output_dir(out: Path) -> Path:
+    """Create an evaluation's output directory (``--out``); a one-line error if it cannot be."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise EvaluationError(f'cannot create the output directory {out} ({exc.strerror}); '
+                              'choose another --out') from None
+    return out
+
+
 def evaluate(run_dir: Path, sets: list[EvalSet], out: Path | None = None,
              record: bool = True, *, live_port: int = 0,
              sim_params: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -245,12 +255,7 @@ def evaluate(run_dir: Path, sets: list[EvalSet], out: Path | None = None,
             config = config.in_world(sim_params)
         except TrainConfigError as exc:
             raise EvaluationError(f'--sim-params: {exc}') from None
-    out = out or run_dir / EVAL
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise EvaluationError(f'cannot create the output directory {out} ({exc.strerror}); '
-                              'choose another --out') from None
+    out = output_dir(out or run_dir / EVAL)
     env = env_for_run(config, record)
     try:
         if live_port:  # --live: this process serves the Foxglove live view

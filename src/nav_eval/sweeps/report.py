@@ -41,6 +41,7 @@ from nav_gym.run_dir import (
     EVAL,
     FINAL_MODEL,
     RESULTS,
+    RESUME_COMMAND,
     SUMMARY,
     load_config,
     read_traces,
@@ -427,8 +428,7 @@ def write_sweep_report(folder: Path) -> Path:
     names = _trial_configs(folder, spec)
     trials = [read_trial(r) for r in runs]
     groups = group_trials(trials, names)
-    missing = [f"{t['name']}: no final evaluation; run `{_missing_eval(t['run_dir'], spec)}`"
-               for t in trials if len(t['final']) < 2]
+    missing = [_missing_line(t, folder, spec) for t in trials if len(t['final']) < 2]
     banks = bank_rows(folder, groups)
     data: dict[str, Any] = {
         'configurations': {c: [t['name'] for t in m] for c, m in groups.items()},
@@ -461,11 +461,20 @@ def write_sweep_report(folder: Path) -> Path:
     return folder / SWEEP_REPORT
 
 
-def _missing_eval(run_dir: Path, spec: dict[str, Any]) -> str:
+def _missing_line(trial: dict[str, Any], folder: Path, spec: dict[str, Any]) -> str:
+    """Say what a trial without its final evaluation lacks and the command that completes it."""
+    if spec:
+        # a sweep's resume finishes its trainings and then their evaluations
+        what = 'training unfinished' if not trial['finished'] else 'no final evaluation'
+        return f"{trial['name']}: {what}; run `visnav-sweep --resume {folder}`"
+    if not trial['finished']:
+        return (f"{trial['name']}: training unfinished; run `{RESUME_COMMAND} {trial['run_dir']}`,"
+                ' then evaluate it')
     train = seed_text(spec.get('train_seeds', TRAIN_BANK))
     heldout = seed_text(spec.get('heldout_seeds', HELDOUT_BANK))
-    return (f'nav-eval-evaluate {run_dir} --sets dqn_train,dqn_heldout --train-seeds {train} '
-            f'--heldout-seeds {heldout} --no-record')
+    return (f"{trial['name']}: no final evaluation; run `nav-eval-evaluate {trial['run_dir']} "
+            f'--sets dqn_train,dqn_heldout --train-seeds {train} --heldout-seeds {heldout} '
+            '--no-record`')
 
 
 def _trial_configs(folder: Path, spec: dict[str, Any]) -> dict[str, str]:
