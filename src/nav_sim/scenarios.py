@@ -100,8 +100,11 @@ def build_banks(config: SimConfig, geometry: ArenaGeometry) -> dict[str, tuple[L
                             f'{len(geometry.shapes)} obstacle slots')
     gap = config.obstacle_gap
     rng = np.random.default_rng(config.train_bank_seed)
-    train = tuple(_sample_layout(rng, 'train', i, count, geometry, gap)
-                  for i in range(config.train_layouts))
+    try:
+        train = tuple(_sample_layout(rng, 'train', i, count, geometry, gap)
+                      for i in range(config.train_layouts))
+    except ScenarioError as exc:  # a world's settings, not its file: name both
+        raise ScenarioError(f'world {config.world}: {exc}') from None
     rng = np.random.default_rng(config.heldout_bank_seed)
     heldout: list[Layout] = []
     for _ in range(MAX_TRIES):

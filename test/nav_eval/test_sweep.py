@@ -189,7 +189,7 @@ def test_a_failing_trial_is_retried_then_reported(tmp_path):
     assert result.returncode == 1, explain(result)
     assert 'retry seed1' in result.stdout and 'FAILED seed1' in result.stdout
     assert 'trial seed1 FAILED (tried 2 times)' in result.stdout
-    assert 'num_obstacles' in result.stdout  # the cause, from the tail of the trial's log
+    assert 'world arena.xml: could not place' in result.stdout  # the cause, from the trial's log
     report = (tmp_path / 'f' / 'Sweep.md').read_text()
     assert '## Failed trials' in report and 'num_obstacles' in report
 

@@ -24,8 +24,10 @@ from nav_sim.sim_process import SimProcess
 
 @pytest.mark.parametrize('sim_params', [
     {'world': 'clutter.xml'},
+    {'world': 'rooms.xml'},
     {'world': 'rooms.xml', 'randomize_look': True},
-], ids=['clutter', 'rooms-randomised'])
+    {'world': 'arena.xml', 'randomize_look': True},
+], ids=['clutter', 'rooms', 'rooms-randomised', 'arena-randomised'])
 def test_the_checklist_and_both_env_checkers_pass_in_the_world(namespace, sim_params):
     """arena.xml's checklist is test_commands' ``nav-gym-validate`` test."""
     config = EnvConfig(sim='embedded', namespace=namespace, sim_params=sim_params)

@@ -97,7 +97,7 @@ def test_no_drawn_colour_takes_the_goals_hue_and_the_light_stays_in_range():
             assert look.light_dir[2] < -0.5  # from above: 35 degrees or more
 
 
-@pytest.mark.parametrize('world', ['arena.xml', 'rooms.xml'])
+@pytest.mark.parametrize('world', ['arena.xml', 'clutter.xml', 'rooms.xml'])
 def test_goal_pixels_appear_only_on_the_goal_in_every_look(world):
     """Render 40 looks facing the goal: the goal detector fires on the goal's pixels only.
 

@@ -8,9 +8,10 @@ import pytest
 
 from nav_gym.actions import action_twists
 from nav_gym.config import EnvConfig
+from nav_sim.config import SimConfig
 from nav_sim.geometry import Layout, Placement
 from nav_sim.planner import Planner, motion
-from nav_sim.sim import twist_to_wheels
+from nav_sim.sim import NavSim, twist_to_wheels
 
 
 @pytest.fixture(scope='module')
@@ -51,6 +52,28 @@ def test_plans_reach_the_goal_in_the_sim(sim, planner, split, seeds):
             if result.done:
                 break
         assert result.event == 'goal' and result.episode_step == len(plan), seed
+
+
+@pytest.mark.parametrize('world', ['clutter.xml', 'rooms.xml'])
+def test_plans_reach_the_goal_in_the_other_worlds(world):
+    """The oracle's plans in each world, within the world's own episode limit."""
+    env_config = EnvConfig(sim_params={'world': world})
+    limit = env_config.max_episode_steps
+    core = NavSim(SimConfig.from_dict({'world': world}))
+    try:
+        world_planner = Planner(core.world.geometry, core.config, action_twists(env_config))
+        for split, seed in (('train', 101), ('heldout', 201), ('heldout', 202)):
+            scenario = core.reset(seed, split)
+            plan = world_planner.plan(scenario.layout, core.pose, scenario.goal, limit)
+            assert plan is not None and 0 < len(plan) <= limit, (split, seed)
+            for action in plan:
+                result = core.step(twist_to_wheels(*action_twists(env_config)[action],
+                                                   core.config))
+                if result.done:
+                    break
+            assert result.event == 'goal' and result.episode_step == len(plan), (split, seed)
+    finally:
+        core.close()
 
 
 def test_a_goal_walled_in_by_obstacles_is_unreachable(sim, planner):

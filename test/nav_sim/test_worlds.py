@@ -272,15 +272,16 @@ def test_reachable_is_the_fields_answer_and_free_cells_the_scalar_clearance():
             assert footprint.reachable(check, (x, y), goal) == math.isfinite(field.at(x, y))
 
 
+@pytest.mark.parametrize('randomize_look', [False, True], ids=['plain', 'drawn-looks'])
 @pytest.mark.parametrize('world', WORLDS)
-def test_every_world_gives_the_same_bytes_for_the_same_seed(world):
+def test_every_world_gives_the_same_bytes_for_the_same_seed(world, randomize_look):
     def frames(sim: NavSim) -> list[bytes]:
         out = []
         for seed, split in ((101, 'train'), (102, 'train'), (201, 'heldout')):
             sim.reset(seed, split)
             out.append(sim.render().tobytes())
         return out
-    config = SimConfig.from_dict({'world': world})
+    config = SimConfig.from_dict({'world': world, 'randomize_look': randomize_look})
     first, second = NavSim(config), NavSim(config)
     try:
         images = frames(first)
