@@ -142,6 +142,25 @@ def test_aggregate_a_folder_of_runs_with_two_configurations(finished, tmp_path):
     assert 'episodes without a collision (1 - collision rate)' in report
 
 
+def test_a_run_from_before_a_sim_setting_groups_with_its_new_twin(finished, tmp_path):
+    """A run saved before ``obstacle_gap`` and ``randomize_look`` existed ran at their defaults."""
+    folder, result = finished
+    assert result.returncode == 0, explain(result)
+    for seed in (1, 2):
+        shutil.copytree(folder / 'trials' / f'seed{seed}', tmp_path / f'seed{seed}',
+                        ignore=shutil.ignore_patterns('checkpoints', 'tb', 'traces'))
+    older = tmp_path / 'seed2' / 'config.yaml'
+    config = yaml.safe_load(older.read_text())
+    for name in ('obstacle_gap', 'randomize_look'):
+        del config['sim_params'][name]
+    older.write_text(yaml.safe_dump(config))
+    done = sweep('--aggregate', str(tmp_path), timeout=300)
+    assert done.returncode == 0, explain(done)
+    configurations = json.loads((tmp_path / 'results.json').read_text())['configurations']
+    assert list(configurations.values()) == [['seed1', 'seed2']], configurations
+    assert 'None' not in (tmp_path / 'Sweep.md').read_text()
+
+
 def test_the_report_names_the_command_that_completes_each_missing_trial(finished, tmp_path):
     folder, result = finished
     assert result.returncode == 0, explain(result)

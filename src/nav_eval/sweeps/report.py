@@ -35,6 +35,7 @@ from nav_eval.sweeps.spec import (
     TRIALS,
     SweepSpec,
 )
+from nav_gym.errors import NavGymError
 from nav_gym.run_dir import (
     CONFIG,
     CURVE,
@@ -48,6 +49,7 @@ from nav_gym.run_dir import (
 )
 from nav_gym.train_config import TrainConfig, learner_of
 from nav_sim.config import SimConfig
+from nav_sim.errors import NavSimError
 
 FINAL_SETS = {'train': 'dqn_train', 'heldout': 'dqn_heldout'}
 BOOKKEEPING = ('seed', 'run_name', 'runs_dir', 'device', 'namespace', 'sim', 'sim_timeout',
@@ -96,7 +98,7 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
     heldout = final.get('heldout')
     traces = (list(read_traces(run_dir / EVAL, FINAL_SETS['heldout'], heldout['seeds']))
               if heldout else [])
-    key = {k: v for k, v in vars(config).items() if k not in BOOKKEEPING}
+    key = {k: v for k, v in vars(_spelled_out(config)).items() if k not in BOOKKEEPING}
     return {'name': run_dir.name, 'run_dir': run_dir, 'seed': config.seed, 'settings': key,
             'final': final, 'curve': curve,
             'anatomy': anatomy.traces_anatomy(traces, results.get('arena'), half_fov(config)),
@@ -110,6 +112,19 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
 def half_fov(config: TrainConfig) -> float:
     """Return the camera's horizontal half field of view (rad) of a run's sim settings."""
     return math.radians(SimConfig.from_params(config.sim_params).camera_hfov_deg) / 2.0
+
+
+def _spelled_out(config: TrainConfig) -> TrainConfig:
+    """Return a run's config with every sim parameter named, as runs save it since the worlds.
+
+    An older run names only the sim parameters set then; those added since ran at their
+    default (the world's), so trials of either age group together and name no ``None``.
+    Where the run's world cannot be read here, the config stays as saved.
+    """
+    try:
+        return config.with_full_sim_params()
+    except (NavGymError, NavSimError):
+        return config
 
 
 def group_trials(trials: list[dict[str, Any]], names: dict[str, str]) -> dict[str, list[dict]]:
