@@ -93,18 +93,25 @@ def layout_difference(a: Layout, b: Layout) -> float:
 
 
 def build_banks(config: SimConfig, geometry: ArenaGeometry) -> dict[str, tuple[Layout, ...]]:
-    """Generate the training and held-out layout banks (deterministic for a config)."""
+    """Generate the training and held-out layout banks (deterministic for a config).
+
+    A ScenarioError names the world: the settings, not the file, left no room for the banks.
+    """
+    try:
+        return _build_banks(config, geometry)
+    except ScenarioError as exc:
+        raise ScenarioError(f'world {config.world}: {exc}') from None
+
+
+def _build_banks(config: SimConfig, geometry: ArenaGeometry) -> dict[str, tuple[Layout, ...]]:
     count = config.num_obstacles
     if count > len(geometry.shapes):
         raise ScenarioError(f'num_obstacles={count} but the world has only '
                             f'{len(geometry.shapes)} obstacle slots')
     gap = config.obstacle_gap
     rng = np.random.default_rng(config.train_bank_seed)
-    try:
-        train = tuple(_sample_layout(rng, 'train', i, count, geometry, gap)
-                      for i in range(config.train_layouts))
-    except ScenarioError as exc:  # a world's settings, not its file: name both
-        raise ScenarioError(f'world {config.world}: {exc}') from None
+    train = tuple(_sample_layout(rng, 'train', i, count, geometry, gap)
+                  for i in range(config.train_layouts))
     rng = np.random.default_rng(config.heldout_bank_seed)
     heldout: list[Layout] = []
     for _ in range(MAX_TRIES):

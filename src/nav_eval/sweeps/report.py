@@ -477,7 +477,10 @@ def write_sweep_report(folder: Path) -> Path:
 
 
 def _missing_line(trial: dict[str, Any], folder: Path, spec: dict[str, Any]) -> str:
-    """Say what a trial without its final evaluation lacks and the command that completes it."""
+    """Say what a trial without its final evaluation lacks and the command that completes it.
+
+    In a sweep (``spec`` from sweep.json) its resume does both; a folder of runs has the banks.
+    """
     if spec:
         # a sweep's resume finishes its trainings and then their evaluations
         what = 'training unfinished' if not trial['finished'] else 'no final evaluation'
@@ -485,11 +488,9 @@ def _missing_line(trial: dict[str, Any], folder: Path, spec: dict[str, Any]) -> 
     if not trial['finished']:
         return (f"{trial['name']}: training unfinished; run `{RESUME_COMMAND} {trial['run_dir']}`,"
                 ' then evaluate it')
-    train = seed_text(spec.get('train_seeds', TRAIN_BANK))
-    heldout = seed_text(spec.get('heldout_seeds', HELDOUT_BANK))
     return (f"{trial['name']}: no final evaluation; run `nav-eval-evaluate {trial['run_dir']} "
-            f'--sets dqn_train,dqn_heldout --train-seeds {train} --heldout-seeds {heldout} '
-            '--no-record`')
+            f'--sets dqn_train,dqn_heldout --train-seeds {seed_text(TRAIN_BANK)} '
+            f'--heldout-seeds {seed_text(HELDOUT_BANK)} --no-record`')
 
 
 def _trial_configs(folder: Path, spec: dict[str, Any]) -> dict[str, str]:
