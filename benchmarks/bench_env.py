@@ -14,7 +14,7 @@ Measured side by side in one run.
    It runs ``--dqn-repeats`` times alternating, each in a child process because OpenMP reads
    its settings once: with passive OpenMP waits (``OMP_WAIT_POLICY=PASSIVE``) and with
    libgomp's default waits.  Wall-clock time decides which is faster (training's default,
-   see ``nav_gym.timing.quiet_learner_threads``); the env share is a diagnostic.
+   see ``nav_gym.training.timing.quiet_learner_threads``); the env share is a diagnostic.
 """
 
 from __future__ import annotations
@@ -32,12 +32,14 @@ os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 
 import numpy as np  # noqa: E402
 
-from nav_gym.actions import action_twists  # noqa: E402
-from nav_gym.config import EnvConfig  # noqa: E402
-from nav_gym.env import NavigationEnv, reward_terms  # noqa: E402
-from nav_gym.observation import rgb_to_observation  # noqa: E402
-from nav_gym.timing import EnvTimer  # noqa: E402
-from nav_sim.sim import NavSim, twist_to_wheels  # noqa: E402
+from nav_gym.env.actions import action_twists  # noqa: E402
+from nav_gym.env.config import EnvConfig  # noqa: E402
+from nav_gym.env.navigation import NavigationEnv  # noqa: E402
+from nav_gym.env.observation import rgb_to_observation  # noqa: E402
+from nav_gym.env.reward import reward_terms
+from nav_gym.training.timing import EnvTimer  # noqa: E402
+from nav_sim.core.kinematics import twist_to_wheels
+from nav_sim.core.sim import NavSim  # noqa: E402
 
 
 def actions(n: int) -> np.ndarray:
@@ -94,7 +96,7 @@ def dqn_share(steps: int, learning_starts: int, config: EnvConfig
     """(env seconds, wall seconds, steps/s, env share) of a short DQN run through ROS."""
     from stable_baselines3 import DQN
 
-    from nav_gym.train_config import TrainConfig
+    from nav_gym.training.config import TrainConfig
     timer = EnvTimer(NavigationEnv(config))
     try:
         kwargs = {**TrainConfig().dqn_kwargs(), 'learning_starts': learning_starts,

@@ -47,10 +47,10 @@ import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from nav_gym import train_config  # noqa: E402
-from nav_gym.learner import learner_class, learner_kwargs, learner_policy  # noqa: E402
-from nav_gym.observation import OBS_SHAPE  # noqa: E402
-from nav_gym.run_dir import SUMMARY  # noqa: E402
+from nav_gym.env.observation import OBS_SHAPE  # noqa: E402
+from nav_gym.training import config as train_config  # noqa: E402
+from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy  # noqa: E402
+from nav_gym.training.run_dir import SUMMARY  # noqa: E402
 
 #: where a gradient step's time goes: a name -> the calls whose cumulative time it is
 PHASES = {'sampling': ('buffers.py', 'sample'),

@@ -7,7 +7,7 @@ to every channel.
 
 One env (its own sim child) runs the same seeded random actions in every segment; the three
 modes alternate round by round (off, on without a viewer, on with a viewer) so that drift in the
-machine's load spreads over all three.  The viewer is ``python -m nav_sim.live_client``, a
+machine's load spreads over all three.  The viewer is ``python -m nav_sim.viz.client``, a
 headless WebSocket client in its own process (as Foxglove would be), subscribed to everything.
 Target: with a viewer, env steps at most 5 % slower than with the live view off.
 """
@@ -26,9 +26,9 @@ os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 
 import numpy as np  # noqa: E402
 
-from nav_gym.config import EnvConfig  # noqa: E402
-from nav_gym.env import NavigationEnv  # noqa: E402
-from nav_sim import live_topics  # noqa: E402
+from nav_gym.env.config import EnvConfig  # noqa: E402
+from nav_gym.env.navigation import NavigationEnv  # noqa: E402
+from nav_sim.viz import topics as live_topics  # noqa: E402
 
 MODES = ('off', 'on, no viewer', 'on, 1 viewer (all topics)')
 
@@ -57,7 +57,7 @@ def run_steps(env: NavigationEnv, actions: np.ndarray, seed: int
 
 def start_viewer(port: int, env: NavigationEnv, timeout: float = 30.0) -> subprocess.Popen:
     """Start a headless viewer subscribed to every channel; return once the server sees it."""
-    viewer = subprocess.Popen([sys.executable, '-m', 'nav_sim.live_client', '--port', str(port)],
+    viewer = subprocess.Popen([sys.executable, '-m', 'nav_sim.viz.client', '--port', str(port)],
                               stdout=subprocess.PIPE, text=True)
     deadline = time.monotonic() + timeout
     view = env.live.view
@@ -105,7 +105,7 @@ def main() -> None:
                                                  results.items()), flush=True)
     finally:
         env.close()
-    from nav_sim.live import MAX_RATE_HZ
+    from nav_sim.viz.server import MAX_RATE_HZ
     rates = ', '.join(f'{t} {hz:.0f}/s' for t, hz in MAX_RATE_HZ.items())
     print(f'\nmedians of {args.rounds} rounds x {args.steps} steps; at most {rates}')
     print(f"  {'mode':<28} {'steps/s':>8} {'time/step':>10} {'in live view':>13} "

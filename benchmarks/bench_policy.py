@@ -55,19 +55,22 @@ from nav_eval.reporting.closed_loop import (  # noqa: E402  # noqa: E402
 )
 from nav_eval.reporting.format import table  # noqa: E402
 from nav_eval.seeds import parse_seeds  # noqa: E402
-from nav_gym.policy import Controller, PolicyConfig, load_policy  # noqa: E402
-from nav_gym.run_dir import FINAL_MODEL, load_config  # noqa: E402
-from nav_gym.timing import quiet_learner_threads  # noqa: E402
-from nav_gym.train_config import TrainConfig  # noqa: E402
-from nav_sim import ros_msgs  # noqa: E402
-from nav_sim.sim import NavSim, twist_to_wheels  # noqa: E402
+from nav_gym.policy.actors import load_policy
+from nav_gym.policy.config import PolicyConfig
+from nav_gym.policy.controller import Controller  # noqa: E402
+from nav_gym.training.config import TrainConfig  # noqa: E402
+from nav_gym.training.run_dir import FINAL_MODEL, load_config  # noqa: E402
+from nav_gym.training.timing import quiet_learner_threads  # noqa: E402
+from nav_sim.core.kinematics import twist_to_wheels
+from nav_sim.core.sim import NavSim  # noqa: E402
+from nav_sim.ros import messages as ros_msgs  # noqa: E402
 
 
 def untrained_run(folder: Path) -> Path:
     """Write a run directory with the default learner's untrained network; return it."""
     import gymnasium as gym
 
-    from nav_gym.learner import learner_class, learner_kwargs, learner_policy
+    from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy
 
     class Spaces(gym.Env):
         observation_space = gym.spaces.Box(0, 255, (3, 84, 84), np.uint8)
@@ -130,8 +133,9 @@ def throughput(run: Path, images: list, seconds: float) -> float:
     from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import Image, JointState
 
-    from nav_gym.policy_process import PolicyProcess
-    from nav_sim import interface, qos
+    from nav_gym.policy.process import PolicyProcess
+    from nav_sim import interface
+    from nav_sim.ros import qos
     namespace = f'/bench_policy_{os.getpid()}'
     context = rclpy.Context()
     rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)

@@ -23,9 +23,10 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 
-from nav_sim.client import SimClient  # noqa: E402
-from nav_sim.sim import NavSim, twist_to_wheels  # noqa: E402
-from nav_sim.sim_process import SimProcess  # noqa: E402
+from nav_sim.core.kinematics import twist_to_wheels
+from nav_sim.core.sim import NavSim  # noqa: E402
+from nav_sim.ros.client import SimClient  # noqa: E402
+from nav_sim.ros.process import SimProcess  # noqa: E402
 
 TURN = (0.0, 1.0)  # turning in place: the episode never ends, every period does full work
 

@@ -13,8 +13,13 @@ import sys
 
 import pytest
 
-# Must happen before rclpy is imported by any test module.
-os.environ['ROS_DOMAIN_ID'] = str(1 + os.getpid() % 100)
+from nav_eval.sweeps.domain import DOMAIN_IDS, reserve_domain
+
+# Must happen before rclpy is imported by any test module.  The domain is reserved the way a
+# sweep's trials reserve theirs (a bound port per id, held until this run ends), so concurrent
+# test runs and sweeps on this host never share one.
+_DOMAIN = reserve_domain(DOMAIN_IDS)
+os.environ['ROS_DOMAIN_ID'] = str(_DOMAIN.domain_id)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 os.environ.setdefault('MUJOCO_GL', 'egl')

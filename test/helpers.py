@@ -12,11 +12,15 @@ import socket
 import subprocess
 import time
 from collections.abc import Callable
+from pathlib import Path
 from typing import TypeVar
 
 import pytest
 
 T = TypeVar('T')
+
+#: the repository's root (this checkout): its config/ and docs/, as the tests read them
+REPO = Path(__file__).resolve().parents[1]
 
 
 def wait_until(predicate: Callable[[], T], timeout: float, what: str,
@@ -73,8 +77,8 @@ def make_tiny_run(path, spaces_only: type, steps: int = 32, **settings: object):
     then ``steps`` more as ``final_model.zip``: enough for evaluation, reports and the policy
     node, in seconds.
     """
-    from nav_gym.learner import learner_class, learner_kwargs, learner_policy
-    from nav_gym.train_config import TrainConfig
+    from nav_gym.training.config import TrainConfig
+    from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy
     config = TrainConfig(**settings)
     (path / 'config.yaml').write_text(config.to_yaml())
     learner = config.learner()

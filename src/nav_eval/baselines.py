@@ -17,8 +17,8 @@ from pathlib import Path
 from nav_eval.evaluation.baselines import BASELINE_POLICIES, run_baselines
 from nav_eval.seeds import HELDOUT_BANK, TRAIN_BANK, parse_seeds, seed_text
 from nav_gym.cli import run_command, strip_ros_args
-from nav_gym.timing import quiet_learner_threads
-from nav_gym.train_config import build
+from nav_gym.training.config import build
+from nav_gym.training.timing import quiet_learner_threads
 
 
 def main(argv: list[str] | None = None) -> None:

@@ -2,15 +2,14 @@
 
     visnav-demo [--model RUN] [--seed 101] [--split train] [--rate 1] [--live [PORT]]
 
-Starts the sim node in ``realtime`` mode and the policy node (``ros2 run nav_gym policy``),
-each in its own process, as a robot would run them: nobody waits for the policy.  With
-``--model RUN`` (a run directory or a checkpoint ``.zip``) the trained policy drives; without
-one, the image-only servo baseline (``policy:=servo``, :mod:`nav_gym.servo`) drives the robot
-to the goal.  Prints the scenario, then each control period: the action the sim applied, the
-wheel speeds, pose, distance and event, and how late the command was.  With ``--live`` this
-process serves the Foxglove live view (camera, observation, 3D scene, the episode's numbers and
-the policy's decisions on the Policy node tab).  The sim alone, driven by a script in lockstep,
-is ``nav-sim-demo``.
+Starts the sim node in ``realtime`` mode and the policy node (``ros2 run nav_gym policy``), each in
+its own process, as a robot would run them: nobody waits for the policy.  With ``--model RUN`` (a
+run directory or a checkpoint ``.zip``) the trained policy drives; without one, the image-only
+servo baseline (``policy:=servo``, :mod:`nav_gym.policy.servo`) drives the robot to the
+goal.  Prints the scenario, then each control period: the action the sim applied, the wheel speeds,
+pose, distance and event, and how late the command was.  With ``--live`` this process serves the
+Foxglove live view (camera, observation, 3D scene, the episode's numbers and the policy's decisions
+on the Policy node tab).  The sim alone, driven by a script in lockstep, is ``nav-sim-demo``.
 """
 
 from __future__ import annotations
@@ -24,11 +23,13 @@ import numpy as np
 
 from nav_eval.evaluation.closed_loop import ClosedLoop, LoopSettings, run_episode
 from nav_gym.cli import run_command, strip_ros_args
-from nav_gym.policy import model_file, run_of
-from nav_gym.run_dir import load_config
-from nav_gym.timing import quiet_learner_threads
-from nav_gym.train_config import TrainConfig
-from nav_sim.live import DEFAULT_PORT
+from nav_gym.policy.actors import model_file, run_of
+from nav_gym.training.config import TrainConfig
+from nav_gym.training.run_dir import load_config
+from nav_gym.training.timing import quiet_learner_threads
+from nav_sim.core.config import HELDOUT, TRAIN
+from nav_sim.core.scenarios import DEMO_SEED
+from nav_sim.viz.options import add_live_argument
 
 PROG = 'visnav-demo'
 
@@ -85,8 +86,8 @@ def run(model: str | None, seed: int, split: str, rate: float, live_port: int) -
           flush=True)
     live = None
     if live_port:
-        from nav_gym.live_view import EnvLive
-        from nav_sim.live_topics import CLOSED_LOOP_TOPICS
+        from nav_gym.env.live_view import EnvLive
+        from nav_sim.viz.topics import CLOSED_LOOP_TOPICS
         live = EnvLive(live_port, config.sim_params, topics=CLOSED_LOOP_TOPICS)
         print(f'live view: open {live.url} in Foxglove (layout: config/foxglove/visnav.json)',
               flush=True)
@@ -116,13 +117,11 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
     parser.add_argument('--model', help='a run directory or checkpoint .zip (default: the '
                         'image-only servo baseline)')
-    parser.add_argument('--seed', type=int, default=101)
-    parser.add_argument('--split', default='train', choices=('train', 'heldout'))
+    parser.add_argument('--seed', type=int, default=DEMO_SEED)
+    parser.add_argument('--split', default=TRAIN, choices=(TRAIN, HELDOUT))
     parser.add_argument('--rate', type=float, default=1.0,
                         help='sim seconds per wall-clock second (default 1: wall-clock pace)')
-    parser.add_argument('--live', nargs='?', type=int, const=DEFAULT_PORT, default=0,
-                        metavar='PORT', help='serve the Foxglove live view on '
-                        f'ws://localhost:PORT (default {DEFAULT_PORT})')
+    add_live_argument(parser, 'the Foxglove live view')
     args = parser.parse_args(strip_ros_args(argv))
     if not 0.0 < args.rate < float('inf'):
         parser.error(f'--rate must be a number above zero, got {args.rate}')

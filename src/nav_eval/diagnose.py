@@ -17,7 +17,7 @@ from pathlib import Path
 
 from nav_eval.reporting.diagnosis_report import diagnose_run
 from nav_gym.cli import run_command, strip_ros_args
-from nav_gym.timing import quiet_learner_threads
+from nav_gym.training.timing import quiet_learner_threads
 
 
 def main(argv: list[str] | None = None) -> None:

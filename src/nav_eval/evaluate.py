@@ -43,17 +43,19 @@ from nav_eval.seeds import (
     seed_text,
 )
 from nav_gym.cli import run_command, strip_ros_args
-from nav_gym.live_hooks import add_live_argument
-from nav_gym.run_dir import CLOSED_LOOP, EVAL, FINAL_MODEL, VIDEOS
-from nav_gym.timing import quiet_learner_threads
-from nav_gym.train_config import coerce
+from nav_gym.training.config import coerce
+from nav_gym.training.run_dir import CLOSED_LOOP, EVAL, FINAL_MODEL, VIDEOS
+from nav_gym.training.timing import quiet_learner_threads
+from nav_sim.core.config import HELDOUT, TRAIN
+from nav_sim.viz.options import add_live_argument
 
 
 def print_videos(run_dir: Path) -> None:
     """Write the report's representative episodes as videos to RUN_DIR/eval/videos/; say so."""
-    from nav_eval.reporting.run_report import load_run, write_videos  # matplotlib, ffmpeg
+    from nav_eval.reporting.run_inputs import load_run
+    from nav_eval.reporting.videos import write_run_videos  # matplotlib, ffmpeg
     start = time.perf_counter()
-    written = write_videos(load_run(run_dir), run_dir / EVAL / VIDEOS)
+    written = write_run_videos(load_run(run_dir), run_dir / EVAL / VIDEOS)
     for caption, path, problem in written:
         print(f'video {path}: {caption}' if path else f'no video of {caption}: {problem}')
     if not written:
@@ -64,6 +66,15 @@ def print_videos(run_dir: Path) -> None:
 
 def main(argv: list[str] | None = None) -> None:
     """Run the ``nav-eval-evaluate`` command: evaluate the sets and print the results table."""
+    args = command_parser().parse_args(strip_ros_args(argv))
+    quiet_learner_threads()  # the policy's forward passes must not spin against the sim
+    if args.closed_loop:
+        run_command('nav-eval-evaluate', lambda: closed_loop(args))
+    run_command('nav-eval-evaluate', lambda: lockstep(args))
+
+
+def command_parser() -> argparse.ArgumentParser:
+    """Return the command's argument parser."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('run_dir', type=Path, help='training run directory')
     parser.add_argument('--sets', default=','.join(DEFAULT_SETS),
@@ -92,42 +103,39 @@ def main(argv: list[str] | None = None) -> None:
                         metavar='R[,R...]', help='with --closed-loop: sim seconds per wall-clock '
                         'second, one closed-loop set per rate (default 1,4)')
     add_live_argument(parser)
-    args = parser.parse_args(strip_ros_args(argv))
-    quiet_learner_threads()  # the policy's forward passes must not spin against the sim
-    if args.closed_loop:
-        run_command('nav-eval-evaluate', lambda: closed_loop(args))
+    return parser
 
-    def body() -> int:
-        eval_dir = (args.run_dir / EVAL).resolve()
-        writes_eval = args.out is None or args.out.resolve() == eval_dir
-        if args.video and not writes_eval:
-            raise EvaluationError('--video reads the evaluation where the report does, in '
-                                  'RUN_DIR/eval: leave out --out')
-        sets = plan_sets(args.run_dir, [s for s in args.sets.split(',') if s],
-                         parse_seeds(args.train_seeds or seed_text(WORKSHOP_TRAIN)),
-                         parse_seeds(args.heldout_seeds or seed_text(WORKSHOP_HELDOUT)),
-                         args.checkpoint, args.early_checkpoint)
-        if writes_eval and any(s.policy == 'explore' for s in sets):
-            raise EvaluationError('the explore sets are a diagnosis, not the evaluation: write '
-                                  'them elsewhere with --out (e.g. --out RUN_DIR/eval_explore)')
-        sim_params = (coerce({'sim_params': args.sim_params}, '--sim-params')['sim_params']
-                      if args.sim_params else None)
-        if sim_params and writes_eval:
-            raise EvaluationError("--sim-params plays the policy elsewhere, not the run's own "
-                                  'evaluation: write it with --out (e.g. --out '
-                                  'RUN_DIR/eval_rooms)')
-        start = time.perf_counter()
-        results = evaluate(args.run_dir, sets, args.out, record=not args.no_record,
-                           live_port=args.live, sim_params=sim_params)
-        print(results_markdown(results['sets']))
-        print(f'evaluated {sum(len(s.seeds) for s in sets)} episodes in '
-              f'{time.perf_counter() - start:.1f} s; results in '
-              f'{args.out or args.run_dir / EVAL}')
-        if args.video:
-            print_videos(args.run_dir)
-        return 0
 
-    run_command('nav-eval-evaluate', body)
+def lockstep(args: argparse.Namespace) -> int:
+    """Evaluate the sets in lockstep (the default); print the table; return the exit code."""
+    eval_dir = (args.run_dir / EVAL).resolve()
+    writes_eval = args.out is None or args.out.resolve() == eval_dir
+    if args.video and not writes_eval:
+        raise EvaluationError('--video reads the evaluation where the report does, in '
+                              'RUN_DIR/eval: leave out --out')
+    sets = plan_sets(args.run_dir, [s for s in args.sets.split(',') if s],
+                     parse_seeds(args.train_seeds or seed_text(WORKSHOP_TRAIN)),
+                     parse_seeds(args.heldout_seeds or seed_text(WORKSHOP_HELDOUT)),
+                     args.checkpoint, args.early_checkpoint)
+    if writes_eval and any(s.policy == 'explore' for s in sets):
+        raise EvaluationError('the explore sets are a diagnosis, not the evaluation: write '
+                              'them elsewhere with --out (e.g. --out RUN_DIR/eval_explore)')
+    sim_params = (coerce({'sim_params': args.sim_params}, '--sim-params')['sim_params']
+                  if args.sim_params else None)
+    if sim_params and writes_eval:
+        raise EvaluationError("--sim-params plays the policy elsewhere, not the run's own "
+                              'evaluation: write it with --out (e.g. --out '
+                              'RUN_DIR/eval_rooms)')
+    start = time.perf_counter()
+    results = evaluate(args.run_dir, sets, args.out, record=not args.no_record,
+                       live_port=args.live, sim_params=sim_params)
+    print(results_markdown(results['sets']))
+    print(f'evaluated {sum(len(s.seeds) for s in sets)} episodes in '
+          f'{time.perf_counter() - start:.1f} s; results in '
+          f'{args.out or args.run_dir / EVAL}')
+    if args.video:
+        print_videos(args.run_dir)
+    return 0
 
 
 def parse_rates(text: str) -> tuple[float, ...]:
@@ -146,9 +154,9 @@ def closed_loop(args: argparse.Namespace) -> int:
     if args.video:
         raise EvaluationError('--video shows the lockstep evaluation: leave it out with '
                               '--closed-loop')
-    seeds = {'heldout': parse_seeds(args.heldout_seeds or seed_text(CLOSED_LOOP_HELDOUT))}
+    seeds = {HELDOUT: parse_seeds(args.heldout_seeds or seed_text(CLOSED_LOOP_HELDOUT))}
     if args.train_seeds:
-        seeds = {'train': parse_seeds(args.train_seeds), **seeds}
+        seeds = {TRAIN: parse_seeds(args.train_seeds), **seeds}
     start = time.perf_counter()
     out = args.out or args.run_dir / CLOSED_LOOP
     results = evaluate_closed_loop(args.run_dir, seeds, args.realtime_rate, out,

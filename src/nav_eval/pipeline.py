@@ -11,7 +11,6 @@ Everything lands in one run directory: ``validation.json``, the training files (
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -22,17 +21,17 @@ from nav_eval.evaluation.sets import DEFAULT_SETS, plan_sets
 from nav_eval.reporting.diagnosis_report import diagnose_run
 from nav_eval.reporting.run_report import write_report
 from nav_eval.seeds import WORKSHOP_HELDOUT, WORKSHOP_TRAIN
-from nav_gym import train_config
-from nav_gym.checks import run_checklist
 from nav_gym.cli import run_command, strip_ros_args
-from nav_gym.config import EnvConfig
-from nav_gym.env import NavigationEnv
-from nav_gym.live_hooks import add_live_argument
-from nav_gym.run_dir import CONFIG, FINAL_MODEL, VALIDATION, checkpoints
-from nav_gym.timing import quiet_learner_threads
-from nav_gym.train import config_and_run_dir, train, write_text
-from nav_gym.train_config import TrainConfig
-from nav_gym.validate import format_checklist
+from nav_gym.env.checks import format_checklist, run_checklist, write_checklist
+from nav_gym.env.config import EnvConfig
+from nav_gym.env.navigation import NavigationEnv
+from nav_gym.training import config as train_config
+from nav_gym.training.config import TrainConfig
+from nav_gym.training.files import write_text
+from nav_gym.training.run_dir import CONFIG, FINAL_MODEL, VALIDATION, checkpoints
+from nav_gym.training.timing import quiet_learner_threads
+from nav_gym.training.trainer import config_and_run_dir, train
+from nav_sim.viz.options import add_live_argument
 
 STAGES = ('validate the environment', 'train the DQN', 'evaluate on fixed seeds',
           'diagnose a failed episode', 'write the report')
@@ -60,7 +59,7 @@ def validate_run(config: TrainConfig, run_dir: Path) -> bool:
     finally:
         env.close()
     print(format_checklist(checks), flush=True)
-    (run_dir / VALIDATION).write_text(json.dumps([asdict(c) for c in checks], indent=1))
+    write_checklist(checks, run_dir / VALIDATION)
     return all(c.passed for c in checks)
 
 

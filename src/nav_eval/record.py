@@ -15,10 +15,11 @@ import sys
 from collections.abc import Sequence
 
 from nav_eval.errors import RecordingError
-from nav_eval.recording.recorder import WITH_POLICY, BagRecorder
+from nav_eval.recording.recorder import BagRecorder
 from nav_eval.recording.session import format_counts, wait_until_stopped
+from nav_eval.recording.topics import WITH_POLICY
 from nav_gym.cli import strip_ros_args
-from nav_sim.stop_request import StopRequest, stop_on_signals
+from nav_sim.ros.stop_request import StopRequest, stop_on_signals
 
 PROG = 'nav-eval-record'
 

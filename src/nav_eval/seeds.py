@@ -1,6 +1,6 @@
 """Evaluation seeds: the banks every command shares, and the one way to read and write seeds.
 
-A seed names one scenario of a split (``nav_sim.scenarios``: layout, start and goal drawn from
+A seed names one scenario of a split (``nav_sim.core.scenarios``: layout, start and goal drawn from
 ``(split, seed)``).  The workshop evaluates on ten seeds of each split; a sweep evaluates its
 final models on a hundred of each and every checkpoint on thirty held-out ones.
 """

@@ -9,13 +9,11 @@ Runs :func:`nav_eval.sweeps.trial.train_and_evaluate` with ``nav-gym-train``'s s
 from __future__ import annotations
 
 import json
-import signal
 import sys
 
 from nav_eval.sweeps.trial import train_and_evaluate
-from nav_gym.cli import run_command
-from nav_gym.timing import quiet_learner_threads
-from nav_gym.train import raise_keyboard_interrupt
+from nav_gym.cli import run_command, stop_on_sigterm
+from nav_gym.training.timing import quiet_learner_threads
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -23,7 +21,7 @@ def main(argv: list[str] | None = None) -> None:
     args = sys.argv[1:] if argv is None else argv
     quiet_learner_threads()  # before torch: the policy's forward passes must not spin
     # SIGTERM (the Ray worker died) stops training or evaluation as Ctrl-C does, with cleanup
-    signal.signal(signal.SIGTERM, raise_keyboard_interrupt)
+    stop_on_sigterm()
     run_command('nav_eval.sweep_trial', lambda: train_and_evaluate(json.loads(args[0])))
 
 

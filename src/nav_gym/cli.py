@@ -7,24 +7,27 @@ Each command strips the ``--ros-args`` blocks ``ros2 run`` passes, and runs its 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import signal
 import sys
 from collections.abc import Callable, Sequence
 from typing import Any
 
-import yaml
-
-from nav_gym.config import SIM_MODES, EnvConfig
-from nav_gym.errors import TrainConfigError
+from nav_gym.env.config import SIM_MODES, EnvConfig, parse_mapping
 from nav_sim.errors import VisnavError
+
+#: the env settings that say how to reach the sim, as options of every command that does
+ENV_OPTIONS = ('namespace', 'sim', 'sim_timeout')
 
 
 def add_env_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the options that say how to reach the sim (namespace, attach/embedded, time-out)."""
-    parser.add_argument('--namespace', default='', help='ROS namespace of the sim node')
-    parser.add_argument('--sim', choices=SIM_MODES, default='auto',
-                        help="attach to a running sim, start one ('embedded'), or 'auto'")
-    parser.add_argument('--sim-timeout', type=float, default=5.0,
-                        help='seconds to wait for the sim before failing')
+    """Add the options that say how to reach the sim (EnvConfig's defaults and descriptions)."""
+    fields = {f.name: f for f in dataclasses.fields(EnvConfig)}
+    for name in ENV_OPTIONS:
+        field = fields[name]
+        parser.add_argument('--' + name.replace('_', '-'), type=type(field.default),
+                            default=field.default, help=field.metadata['help'],
+                            **({'choices': SIM_MODES} if name == 'sim' else {}))
     parser.add_argument('--sim-params', default='{}',
                         help="sim parameters for a sim the command starts, as JSON/YAML, e.g. "
                         "'{world: rooms.xml}' (docs/worlds.md)")
@@ -32,15 +35,8 @@ def add_env_arguments(parser: argparse.ArgumentParser) -> None:
 
 def env_config(args: argparse.Namespace, **extra: Any) -> EnvConfig:
     """Return the EnvConfig of the env options (and ``extra`` settings)."""
-    try:
-        sim_params = yaml.safe_load(args.sim_params)
-    except yaml.YAMLError:
-        sim_params = None
-    if not isinstance(sim_params, dict):
-        raise TrainConfigError(f"--sim-params takes a mapping, e.g. '{{world: rooms.xml}}', "
-                               f'got {args.sim_params!r}')
-    return EnvConfig(namespace=args.namespace, sim=args.sim, sim_timeout=args.sim_timeout,
-                     sim_params=sim_params, **extra)
+    return EnvConfig(**{name: getattr(args, name) for name in ENV_OPTIONS},
+                     sim_params=parse_mapping(args.sim_params, '--sim-params'), **extra)
 
 
 def strip_ros_args(argv: Sequence[str] | None) -> list[str]:
@@ -76,3 +72,16 @@ def run_command(name: str, body: Callable[[], int]) -> None:
         print(f'{name}: error: {exc}', file=sys.stderr)
         code = 1
     sys.exit(code)
+
+
+def stop_on_sigterm() -> None:
+    """Handle SIGTERM as Ctrl-C from now on (a stopped run saves a checkpoint and exits 130).
+
+    For the commands that train or evaluate: ``kill``, a Ray worker's end or a closing
+    terminal stop them as Ctrl-C does, with the same cleanup.
+    """
+    signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
+
+
+def _raise_keyboard_interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt

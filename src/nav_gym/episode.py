@@ -12,7 +12,8 @@ from __future__ import annotations
 import argparse
 
 from nav_gym.cli import add_env_arguments, env_config, run_command, strip_ros_args
-from nav_gym.env import ACTION_NAMES, NavigationEnv
+from nav_gym.env.navigation import ACTION_NAMES, NavigationEnv
+from nav_sim.core.scenarios import DEMO_SEED
 
 SCRIPT = [0] * 3 + [1] * 2 + [2] * 4 + [1] * 2 + [0] * 3 + [1] * 4
 
@@ -50,7 +51,7 @@ def main(argv: list[str] | None = None) -> None:
     """Run the ``nav-gym-episode`` command."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_env_arguments(parser)
-    parser.add_argument('--seed', type=int, default=101)
+    parser.add_argument('--seed', type=int, default=DEMO_SEED)
     parser.add_argument('--split', default='train')
     args = parser.parse_args(strip_ros_args(argv))
     run_command('nav-gym-episode', lambda: scripted_episode(args))

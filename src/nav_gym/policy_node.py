@@ -1,195 +1,20 @@
-"""``ros2 run nav_gym policy``: a trained policy driving any ROS 2 camera (a thin adapter).
+"""``ros2 run nav_gym policy`` (and ``nav-gym-policy``): run the policy node until a stop signal.
 
-Subscribes ``camera/image_raw`` (sensor-data QoS: best effort, the newest image) and, on its own
-wall-clock timer every ``period`` seconds, publishes ``cmd_vel`` (geometry_msgs/Twist) with the
-velocities of the action the policy takes on the newest image; nobody waits for it, and it
-waits for nobody.  The model, the observation and the action come from :mod:`nav_gym.policy`
-(no ROS there).  Without an image newer than ``image_timeout`` it publishes zero velocity; on
-SIGINT or SIGTERM it publishes a zero Twist before it exits.
-
-Also publishes (relative names) ``policy/decision`` (sensor_msgs/JointState, stamped with the
-decided image's stamp; names and positions as :data:`nav_sim.interface.DECISION_FIELDS`: action,
-cmd_vel, Q-values, image age, inference time), ``policy/observation`` (the 84x84 observation,
-only while someone subscribes) and about once a second ``/diagnostics``: the decision's time
-budget.  Parameters: :class:`nav_gym.policy.PolicyConfig` (``config/policy.yaml``).
+The node is :class:`nav_gym.policy.node.PolicyNode`; this main owns the process: SIGINT and
+SIGTERM only set a flag, so the node publishes a zero Twist before it exits, and bad settings
+or a bad model are one line (exit code 2 or 1).
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
-import time
-from typing import Any
-
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Twist
-from rcl_interfaces.msg import SetParametersResult
-from rclpy.clock import Clock, ClockType
-from rclpy.duration import Duration
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
-from sensor_msgs.msg import Image, JointState
 
 from nav_gym.errors import PolicyModelError
-from nav_gym.policy import (
-    PARAMETER_TYPES,
-    Command,
-    Controller,
-    PolicyConfig,
-    load_policy,
-)
-from nav_gym.policy_process import READY_MESSAGE
-from nav_sim import interface, qos, ros_msgs
+from nav_gym.policy.node import SIGNAL_CHECK_S, PolicyNode
 from nav_sim.errors import ConfigError
-from nav_sim.interface import DECISION_FIELDS
-from nav_sim.node_params import converted, declare_settings, warn_unknown_overrides
-from nav_sim.step_timing import StepTiming
-from nav_sim.stop_request import StopRequest, stop_on_signals
-
-DYNAMIC = ('period', 'image_timeout')
-WARN_PERIOD_S = 5.0
-STOP_ACK_S = 1.0    # how long the final zero Twist may take to be acknowledged
-SIGNAL_CHECK_S = 0.1  # how often the spin loop looks for a stop signal
-DECISION_PHASES = ('inference', 'publish')
-
-
-class PolicyNode(Node):
-    """Publish the policy's command for the newest camera image at a fixed period."""
-
-    def __init__(self, **kwargs: Any) -> None:
-        """Declare the parameters, load the model and create the topics and the timer."""
-        super().__init__(interface.POLICY_NODE_NAME, **kwargs)
-        values = declare_settings(self, PolicyConfig, dynamic=DYNAMIC)
-        warn_unknown_overrides(self, PARAMETER_TYPES, 'config/policy.yaml')
-        self.settings = PolicyConfig(**values)
-        actor, self.acting = load_policy(self.settings)
-        self.controller = Controller(actor, self.acting, self._image_timeout(self.settings))
-        self.add_pre_set_parameters_callback(lambda p: converted(p, PARAMETER_TYPES))
-        self.add_on_set_parameters_callback(self._validate_parameters)
-        self.add_post_set_parameters_callback(self._apply_parameters)
-        self.pub_cmd = self.create_publisher(Twist, interface.CMD_VEL_TOPIC, qos.CONTROL)
-        self.pub_decision = self.create_publisher(JointState, interface.DECISION_TOPIC,
-                                                  qos.DECISIONS)
-        self.pub_observation = self.create_publisher(
-            Image, interface.POLICY_OBSERVATION_TOPIC, qos.OBSERVATION)
-        self.pub_diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(Image, interface.IMAGE_TOPIC, self._on_image, qos.SENSOR_DATA)
-        # a wall-clock timer, even with use_sim_time: sim time moves in whole control periods,
-        # and a timer on it would fire at each period's start, before that period's image
-        self._timer = self.create_timer(self._period(self.settings), self._on_timer,
-                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
-        self._timing = StepTiming(DECISION_PHASES, unit='decision')
-        self._stops = 0
-        self._state = ''
-        self._errors_logged: set[str] = set()
-        self.get_logger().info(
-            f'{READY_MESSAGE} policy={self.settings.policy} model='
-            f'{self.settings.model or "none"}, period={self._period(self.settings):.3f} s, '
-            f'image_timeout={self.controller.image_timeout:.3f} s, actions (linear m/s, angular '
-            f'rad/s) {self.acting.twists} from {self.acting.source}; subscribed to '
-            f'{self.resolve_topic_name(interface.IMAGE_TOPIC)}, publishing '
-            f'{self.resolve_topic_name(interface.CMD_VEL_TOPIC)}')
-
-    # --- parameters -----------------------------------------------------------------------
-    def _period(self, settings: PolicyConfig) -> float:
-        return settings.period or self.acting.control_period
-
-    def _image_timeout(self, settings: PolicyConfig) -> float:
-        return settings.image_timeout or 2.0 * self._period(settings)
-
-    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        values = dataclasses.asdict(self.settings)
-        values.update({p.name: p.value for p in params if p.name in values})
-        try:
-            PolicyConfig(**values)
-        except (ConfigError, TypeError) as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
-        return SetParametersResult(successful=True)
-
-    def _apply_parameters(self, params: list[Parameter]) -> None:
-        changes = {p.name: p.value for p in params if p.name in DYNAMIC}
-        if changes:
-            self.settings = dataclasses.replace(self.settings, **changes)
-            self.controller.image_timeout = self._image_timeout(self.settings)
-            self._timer.timer_period_ns = round(self._period(self.settings) * 1e9)
-            self._timer.reset()
-
-    # --- acting ---------------------------------------------------------------------------
-    def _on_image(self, msg: Image) -> None:
-        self.controller.on_image(msg)
-
-    def _on_timer(self) -> None:
-        command = self.controller.decide()
-        start = time.perf_counter()
-        self.pub_cmd.publish(_twist(command.linear, command.angular))
-        self.pub_decision.publish(self._decision_msg(command))
-        if command.observation is not None and self.pub_observation.get_subscription_count():
-            self.pub_observation.publish(ros_msgs.image_msg(
-                command.observation.transpose(1, 2, 0), command.stamp,
-                command.frame_id))
-        self._timing.add('publish', time.perf_counter() - start)
-        self._note(command)
-
-    def _decision_msg(self, command: Command) -> JointState:
-        stamp = command.stamp if command.stamp is not None else self.get_clock().now().to_msg()
-        msg = JointState(name=list(DECISION_FIELDS),
-                         position=command.values(self._stamp_age(command)))
-        msg.header.stamp = stamp
-        msg.header.frame_id = command.frame_id
-        return msg
-
-    def _stamp_age(self, command: Command) -> float:
-        """Seconds on this node's clock (sim time with use_sim_time) since the image's stamp."""
-        now = self.get_clock().now().nanoseconds
-        if command.stamp is None or now <= 0:
-            return math.nan
-        return (now - ros_msgs.stamp_to_ns(command.stamp)) / 1e9
-
-    def _note(self, command: Command) -> None:
-        """Log a change into a stop state once (throttled); time the decision."""
-        if command.stopped:
-            self._stops += 1
-            if command.reason == 'bad image':
-                if self.controller.image_error not in self._errors_logged:
-                    self._errors_logged.add(self.controller.image_error)
-                    self.get_logger().error(f'{self.controller.image_error}: publishing zero '
-                                            'velocity until a usable image arrives')
-            elif command.reason != self._state and command.reason == 'no image':
-                self.get_logger().warn(
-                    f'no image on {self.resolve_topic_name(interface.IMAGE_TOPIC)} yet: '
-                    'publishing zero velocity', throttle_duration_sec=WARN_PERIOD_S)
-            elif command.reason != self._state:
-                self.get_logger().warn(
-                    f'no image newer than {self.controller.image_timeout:.3f} s on '
-                    f'{self.resolve_topic_name(interface.IMAGE_TOPIC)}: publishing zero '
-                    'velocity', throttle_duration_sec=WARN_PERIOD_S)
-        self._state = command.reason
-        timing = self._timing
-        timing.add('inference', command.inference_s)
-        if not math.isnan(command.image_age_s):
-            timing.add('image_age', command.image_age_s)
-        now = timing.step_done()
-        if timing.due(now):
-            report = {**timing.report(now), 'stops': self._stops}
-            self._stops = 0
-            self.pub_diagnostics.publish(ros_msgs.diagnostics_msg(
-                f'{self.get_fully_qualified_name()}: policy decisions',
-                f"{report['decisions_per_s']:.1f} decisions/s", report,
-                self.get_clock().now().to_msg(), hardware_id='nav_gym'))
-
-    def stop_robot(self) -> None:
-        """Publish a zero Twist and wait (briefly) until its subscribers have it."""
-        self.pub_cmd.publish(_twist(0.0, 0.0))
-        self.pub_cmd.wait_for_all_acked(Duration(seconds=STOP_ACK_S))
-
-
-def _twist(linear: float, angular: float) -> Twist:
-    msg = Twist()
-    msg.linear.x, msg.angular.z = float(linear), float(angular)
-    return msg
+from nav_sim.ros.stop_request import StopRequest, stop_on_signals
 
 
 def main(args: list[str] | None = None) -> None:

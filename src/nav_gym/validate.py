@@ -8,23 +8,11 @@ Every line says PASS or FAIL; the command exits 1 if any check fails.
 from __future__ import annotations
 
 import argparse
-import json
-from dataclasses import asdict
 from pathlib import Path
 
-from nav_gym.checks import Check, run_checklist
 from nav_gym.cli import add_env_arguments, env_config, run_command, strip_ros_args
-from nav_gym.env import NavigationEnv
-
-
-def format_checklist(checks: list[Check]) -> str:
-    """Return the checklist as PASS/FAIL lines and a count."""
-    width = max(len(c.name) for c in checks)
-    lines = [f"{'PASS' if c.passed else 'FAIL'}  {c.name:<{width}}  {c.measured}"
-             f"{'' if c.passed else f'  (expected: {c.expected})'}" for c in checks]
-    failed = sum(not c.passed for c in checks)
-    lines.append(f'{len(checks) - failed} passed, {failed} failed')
-    return '\n'.join(lines)
+from nav_gym.env.checks import format_checklist, run_checklist, write_checklist
+from nav_gym.env.navigation import NavigationEnv
 
 
 def validate(args: argparse.Namespace) -> int:
@@ -39,8 +27,7 @@ def validate(args: argparse.Namespace) -> int:
         env.close()
     print(format_checklist(checks))
     if args.json:
-        Path(args.json).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.json).write_text(json.dumps([asdict(c) for c in checks], indent=2))
+        write_checklist(checks, Path(args.json))
     return 0 if all(c.passed for c in checks) else 1
 
 

@@ -1,4 +1,12 @@
-"""nav_sim: the MuJoCo world, the simulation core and the ``nav_sim`` ROS 2 node."""
+"""nav_sim: the MuJoCo simulation, its ROS 2 node and the Foxglove live view.
+
+``core/`` is the simulation without ROS: settings, world files and their contract, the MuJoCo
+world, scenario banks and looks, kinematics, event names, the sim and the planner.  ``viz/`` is
+the live view (topics, server, layout, client; no rclpy).  ``ros/`` is the ROS 2 adapter: the
+node, its settings, the lockstep client, message conversions, QoS, processes.  The top level
+holds what every layer shares (``interface``: the graph's names and types; ``errors``;
+``paths``: the ament index) and the thin mains ``sim_node`` and ``demo``.
+"""
 
 from __future__ import annotations
 

@@ -14,11 +14,12 @@ import os
 import sys
 import time
 
-from nav_sim.client import SimClient
-from nav_sim.config import SimConfig
+from nav_sim.core.config import TRAIN, SimConfig
+from nav_sim.core.scenarios import DEMO_SEED
 from nav_sim.errors import NavSimError
-from nav_sim.live import DEFAULT_PORT
-from nav_sim.sim_process import SimProcess
+from nav_sim.ros.client import SimClient
+from nav_sim.ros.process import SimProcess
+from nav_sim.viz.options import add_live_argument
 
 FORWARD, LEFT, RIGHT = (0.12, 0.0), (0.0, 1.5), (0.0, -1.5)
 SCRIPT = [('forward', FORWARD)] * 6 + [('left', LEFT)] * 4 + [('forward', FORWARD)] * 6 + \
@@ -62,12 +63,10 @@ def run(seed: int, split: str, namespace: str, live_port: int = 0) -> int:
 def main(argv: list[str] | None = None) -> None:
     """Run the ``nav-sim-demo`` command."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--seed', type=int, default=101)
-    parser.add_argument('--split', default='train')
+    parser.add_argument('--seed', type=int, default=DEMO_SEED)
+    parser.add_argument('--split', default=TRAIN)
     parser.add_argument('--namespace', default=f'/visnav_demo_{os.getpid()}')
-    parser.add_argument('--live', nargs='?', type=int, const=DEFAULT_PORT, default=0,
-                        metavar='PORT', help="serve the sim node's Foxglove live view on "
-                        f'ws://localhost:PORT (default {DEFAULT_PORT}) and run at wall-clock pace')
+    add_live_argument(parser, "the sim node's Foxglove live view", ' and run at wall-clock pace')
     args = parser.parse_args(argv)
     try:
         sys.exit(run(args.seed, args.split, args.namespace, args.live))

@@ -8,11 +8,13 @@ the node, its client, the graph checks, the bag recorder and the bag reader.
 from __future__ import annotations
 
 NODE_NAME = 'sim_node'
+#: the frame of odometry, the goal pose and the live view's 3D scene (sim_node's odom_frame)
+ODOM_FRAME = 'odom'
 
 IMAGE_TOPIC = 'camera/image_raw'  # sensor_msgs/Image, rgb8, one per control period
 CAMERA_INFO_TOPIC = 'camera/camera_info'  # sensor_msgs/CameraInfo, same stamp
 ODOM_TOPIC = 'odom'  # nav_msgs/Odometry, same stamp (privileged: evaluation only)
-EVENT_TOPIC = 'episode_event'  # diagnostic_msgs/DiagnosticArray (see nav_sim.ros_msgs)
+EVENT_TOPIC = 'episode_event'  # diagnostic_msgs/DiagnosticArray (see nav_sim.ros.messages)
 GOAL_TOPIC = 'goal_pose'  # geometry_msgs/PoseStamped, latched, at each reset
 CMD_VEL_TOPIC = 'cmd_vel'  # geometry_msgs/Twist: one control period per message
 CLOCK_TOPIC = '/clock'  # rosgraph_msgs/Clock, with publish_clock (global: ROS's sim time)
@@ -32,3 +34,13 @@ POLICY_OBSERVATION_TOPIC = 'policy/observation'  # sensor_msgs/Image, the 84x84 
 #: action (observation + network; 0 for a repeated decision)
 DECISION_FIELDS = ('action', 'linear', 'angular', 'q_left', 'q_forward', 'q_right',
                    'image_age_ms', 'stamp_age_ms', 'inference_ms')
+
+# The ROS 2 type of each topic above, as bags, the live view and the graph checks name it.
+IMAGE_TYPE = 'sensor_msgs/msg/Image'                  # IMAGE_TOPIC, POLICY_OBSERVATION_TOPIC
+CAMERA_INFO_TYPE = 'sensor_msgs/msg/CameraInfo'       # CAMERA_INFO_TOPIC
+ODOM_TYPE = 'nav_msgs/msg/Odometry'                   # ODOM_TOPIC
+EVENT_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'    # EVENT_TOPIC (and /diagnostics)
+GOAL_TYPE = 'geometry_msgs/msg/PoseStamped'           # GOAL_TOPIC
+CMD_VEL_TYPE = 'geometry_msgs/msg/Twist'              # CMD_VEL_TOPIC
+CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'                # CLOCK_TOPIC
+DECISION_TYPE = 'sensor_msgs/msg/JointState'          # DECISION_TOPIC: named numbers, stamped

@@ -39,6 +39,15 @@ def share_directory(package: str = PACKAGE) -> Path | None:
     return None if prefix is None else prefix / 'share' / package
 
 
+def executable_path(package: str, executable: str) -> Path | None:
+    """``<prefix>/lib/<package>/<executable>``, where ``ros2 run`` looks, or None if unregistered.
+
+    The path is returned whether or not the file exists there.
+    """
+    prefix = package_prefix(package)
+    return None if prefix is None else prefix / 'lib' / package / executable
+
+
 def find_world(world: str) -> Path:
     """Resolve a world file: an existing path, or a name under ``share/nav_sim/worlds``.
 

@@ -4,12 +4,11 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import time
 from pathlib import Path
 
 from helpers import free_port, wait_until
-from nav_sim import live_topics
-from nav_sim.live_client import LiveClient
+from nav_sim.viz import topics as live_topics
+from nav_sim.viz.client import LiveClient
 
 DEMO = str(Path(sys.prefix) / 'bin' / 'visnav-demo')
 
@@ -63,7 +62,9 @@ def test_the_live_view_shows_the_policys_decisions():
     finally:
         if process.poll() is None:
             process.terminate()
-            time.sleep(1.0)
-            process.kill()
+            try:
+                process.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                process.kill()
         out, err = process.communicate()
     assert process.returncode == 0, out + err

@@ -13,14 +13,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from helpers import make_tiny_run
+from helpers import REPO, make_tiny_run
 from nav_eval import seeds
 from nav_eval.errors import EvaluationError
 from nav_eval.evaluation import runner
 from nav_eval.evaluation.sets import DEFAULT_SETS, plan_sets, run_config
 from nav_eval.reporting import run_report
 from nav_eval.reporting.diagnosis_report import diagnose_run
-from nav_gym.train_config import TrainConfig
+from nav_gym.training.config import TrainConfig
 
 SETS = ['random_train', 'dqn_heldout', 'early_train', 'explore_heldout']
 
@@ -215,9 +215,9 @@ def test_the_bags_replay_the_foxglove_layout(run_dir, evaluated):
     topics follow the episodes, with the live view's types.
     """
     from nav_eval.recording.bags import read_bag
-    from nav_sim import live_topics
-    from nav_sim.live_layout import LIVE_ONLY_TOPICS, referenced_topics
-    layout = json.loads((Path(__file__).resolve().parents[2] / 'config' / 'foxglove'
+    from nav_sim.viz import topics as live_topics
+    from nav_sim.viz.layout import LIVE_ONLY_TOPICS, referenced_topics
+    layout = json.loads((REPO / 'config' / 'foxglove'
                          / 'visnav.json').read_text())
     # the policy node's tab comes from a closed-loop evaluation's bag (test_closed_loop)
     wanted = referenced_topics(layout) - set(LIVE_ONLY_TOPICS) - set(live_topics.POLICY_TOPICS)

@@ -13,6 +13,7 @@ import sys
 import pytest
 
 from nav_eval.reporting.run_report import SECTIONS
+from nav_sim.paths import executable_path
 
 TINY = ['--total-timesteps', '200', '--learning-starts', '100', '--checkpoint-freq', '100',
         '--buffer-size', '500', '--max-episode-steps', '12']
@@ -64,10 +65,8 @@ def test_full_protocol_reaches_the_learning_target(tmp_path):
 def test_ros2_run_finds_every_nav_eval_executable(executable):
     """As ros2run resolves it: <prefix of nav_eval>/lib/nav_eval/<executable>."""
     import os
-    from pathlib import Path
 
-    from ament_index_python.packages import get_package_prefix
-    path = Path(get_package_prefix('nav_eval')) / 'lib' / 'nav_eval' / executable
+    path = executable_path('nav_eval', executable)
     assert path.is_file() and os.access(path, os.X_OK)
     result = subprocess.run([str(path), '--help', '--ros-args', '-r', '__ns:=/x'],
                             capture_output=True, text=True, timeout=120)

@@ -25,7 +25,9 @@ from pathlib import Path
 
 import pytest
 
-from nav_sim.sim_process import executable_command, ros_args
+from helpers import wait_until
+from nav_sim.paths import executable_path
+from nav_sim.ros.process import executable_command, ros_args
 
 BIN = Path(sys.prefix) / 'bin'
 DDS = {'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET', 'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4',
@@ -129,19 +131,10 @@ def hosts() -> Iterator[Hosts]:
             ip('netns', 'del', name)
 
 
-def wait_for(predicate, timeout: float, what: str):
-    deadline = time.monotonic() + timeout
-    while not (value := predicate()):
-        if time.monotonic() > deadline:
-            pytest.fail(f'{what}: not within {timeout} s')
-        time.sleep(0.2)
-    return value
-
-
 def test_training_attaches_to_a_sim_on_the_other_host_and_not_without_the_link(hosts,
                                                                                tmp_path):
     sim = hosts.start(0, [*executable_command(), *ros_args('/two')], DDS, tmp_path / 'sim.log')
-    wait_for(lambda: 'nav_sim ready' in (tmp_path / 'sim.log').read_text(), 60.0, 'the sim')
+    wait_until(lambda: 'nav_sim ready' in (tmp_path / 'sim.log').read_text(), 60.0, 'the sim')
     train = [str(BIN / 'nav-gym-train'), '--sim', 'attach', '--namespace', '/two',
              '--total-timesteps', '300', '--runs-dir', str(tmp_path), '--sim-timeout', '10']
     result = hosts.run(1, [*train, '--run-name', 'across'], DDS, timeout=600)
@@ -161,11 +154,11 @@ def test_training_attaches_to_a_sim_on_the_other_host_and_not_without_the_link(h
 
 def test_the_policy_node_drives_a_realtime_sim_on_the_other_host(hosts, tmp_path):
     from nav_eval.recording.bags import read_bag
-    from nav_sim import ros_msgs
+    from nav_sim.ros import messages as ros_msgs
     sim_params = {'mode': 'realtime', 'realtime_rate': 2.0, 'seed': 101}
     hosts.start(0, [*executable_command(), *ros_args('/drive', sim_params)], DDS,
                 tmp_path / 'sim.log')
-    hosts.start(1, [str(Path(sys.prefix) / 'lib' / 'nav_gym' / 'policy'), '--ros-args', '-r',
+    hosts.start(1, [str(executable_path('nav_gym', 'policy')), '--ros-args', '-r',
                     '__ns:=/drive', '-p', 'policy:=servo', '-p', 'period:=0.256'], DDS,
                 tmp_path / 'policy.log')
     bag = tmp_path / 'bag'
@@ -218,7 +211,7 @@ def run_cluster(hosts: Hosts, tmp_path: Path, temp: Path, ray: str, head_address
              '--total-timesteps', '200', '--set', 'learning_starts=100', '--set',
              'checkpoint_freq=100', '--set', 'buffer_size=500', '--set', 'max_episode_steps=12',
              '--train-seeds', '101-102', '--heldout-seeds', '201-202']
-    wait_for(lambda: 'ray start --address' in (tmp_path / 'head.log').read_text()
+    wait_until(lambda: 'ray start --address' in (tmp_path / 'head.log').read_text()
              or head.poll() is not None, 120.0, 'the Ray head')
     assert head.poll() is None, (tmp_path / 'head.log').read_text()[-3000:]
     # without the token: one line that says what to set, within seconds
@@ -238,7 +231,7 @@ def run_cluster(hosts: Hosts, tmp_path: Path, temp: Path, ray: str, head_address
                     f'--temp-dir={temp / "b"}', '--block'], worker_env,
                 tmp_path / 'worker.log')
     status = [ray, 'status', f'--address={head_address}']
-    wait_for(lambda: hosts.run(1, status, worker_env, 60).stdout.count(' node_') >= 2, 120.0,
+    wait_until(lambda: hosts.run(1, status, worker_env, 60).stdout.count(' node_') >= 2, 120.0,
              'the worker node in the cluster')
     result = hosts.run(1, [*sweep, '--name', 'two'], worker_env, timeout=900)
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]

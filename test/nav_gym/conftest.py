@@ -4,7 +4,7 @@ from collections.abc import Iterator
 
 import pytest
 
-from nav_gym.env import NavigationEnv
+from nav_gym.env.navigation import NavigationEnv
 
 
 @pytest.fixture(scope='module')

@@ -12,20 +12,21 @@ import time
 from pathlib import Path
 
 import pytest
-from ament_index_python.packages import get_package_prefix
 
-from helpers import wait_until
+from helpers import REPO, wait_until
 from nav_gym.errors import CheckpointError, TrainConfigError
-from nav_gym.train import checkpoints, load_model
-from nav_gym.train_config import TrainConfig, build, load_yaml
-from nav_sim.config import SimConfig
+from nav_gym.training.checkpoints import load_model
+from nav_gym.training.config import TrainConfig, build, load_yaml
+from nav_gym.training.trainer import checkpoints
+from nav_sim.core.config import SimConfig
+from nav_sim.paths import executable_path
 
 SMOKE = ['--total-timesteps', '300', '--learning-starts', '100', '--checkpoint-freq', '150',
          '--buffer-size', '1000', '--sim', 'embedded']
 
 
 def ros2_run(package: str, executable: str) -> str:
-    return str(Path(get_package_prefix(package)) / 'lib' / package / executable)
+    return str(executable_path(package, executable))
 
 
 def run(args: list[str], timeout: float = 300) -> subprocess.CompletedProcess:
@@ -94,7 +95,7 @@ def test_smoke_training_checkpoints_resumes_and_loads(tmp_path):
     # the run keeps every sim parameter it was trained with, not just the overridden ones
     saved = load_yaml(run_dir / 'config.yaml')['sim_params']
     assert saved == dataclasses.asdict(SimConfig())
-    # the learner's OpenMP threads wait passively (see nav_gym.timing) unless the user chose
+    # the learner's OpenMP threads wait passively (nav_gym.training.timing) unless the user chose
     assert summary['omp_wait_policy'] == os.environ.get('OMP_WAIT_POLICY', 'PASSIVE')
     # the time budget of a step (issue 12): the env's phases, the learner's share, the sim's
     budget = summary['time_budget']
@@ -167,7 +168,7 @@ def test_config_file_and_flags_override_defaults(tmp_path):
 
 
 def test_settings_convert_as_every_other_setting_does():
-    """One conversion (nav_sim.config.convert): '4.0' is 4; 3.7 and 'yes' are errors."""
+    """One conversion (nav_sim.core.config.convert): '4.0' is 4; 3.7 and 'yes' are errors."""
     config = build(None, {'batch_size': '4.0', 'keep_replay_buffer': 'TRUE',
                           'learning_rate': '5e-4', 'goal_reward': '10'})
     assert (config.batch_size, config.keep_replay_buffer) == (4, True)
@@ -180,8 +181,8 @@ def test_settings_convert_as_every_other_setting_does():
 
 def test_a_run_saves_its_whole_env_config(tmp_path):
     """Reward weights and every other EnvConfig field travel with the run's config.yaml."""
-    from nav_gym.config import EnvConfig
-    from nav_gym.run_dir import load_config
+    from nav_gym.env.config import EnvConfig
+    from nav_gym.training.run_dir import load_config
     config = TrainConfig(goal_reward=10.0, step_penalty=-0.05, probe_timeout=0.5)
     assert {f.name for f in dataclasses.fields(EnvConfig)} <= set(dataclasses.asdict(config))
     env = config.env_config()
@@ -200,8 +201,8 @@ def test_a_run_saves_its_whole_env_config(tmp_path):
 def test_the_workshop_config_is_sb3_dqn_exactly_and_sets_only_the_learner():
     import yaml
 
-    from nav_gym.train_config import COMPONENTS
-    path = Path(__file__).parents[2] / 'config' / 'workshop.yaml'
+    from nav_gym.training.config import COMPONENTS
+    path = REPO / 'config' / 'workshop.yaml'
     config = build(str(path), {})
     assert config.learner().vanilla and not TrainConfig().learner().vanilla
     assert set(yaml.safe_load(path.read_text())) <= {'double_q', *COMPONENTS}
@@ -212,8 +213,8 @@ def test_train_yaml_holds_every_default():
 
     import yaml
 
-    from nav_gym.train_config import TrainConfig
-    source = Path(__file__).parents[2] / 'config' / 'train.yaml'  # installed by make setup
+    from nav_gym.training.config import TrainConfig
+    source = REPO / 'config' / 'train.yaml'  # installed by make setup
     values = yaml.safe_load(source.read_text())
     defaults = dataclasses.asdict(TrainConfig())
     assert defaults['max_episode_steps'] == 100  # 0 in the file: the world's limit (arena's)
@@ -222,7 +223,8 @@ def test_train_yaml_holds_every_default():
 
 @pytest.mark.parametrize('preset, expected', [(None, 'PASSIVE'), ('ACTIVE', 'ACTIVE')])
 def test_learner_threads_wait_passively_unless_the_user_chose(preset, expected):
-    code = ('from nav_gym.timing import quiet_learner_threads; p = quiet_learner_threads(); '
+    code = ('from nav_gym.training.timing import quiet_learner_threads\n'
+            'p = quiet_learner_threads()\n'
             'import os, torch; print(p, os.environ["OMP_WAIT_POLICY"])')
     env = {k: v for k, v in os.environ.items() if k != 'OMP_WAIT_POLICY'}
     if preset:

@@ -4,8 +4,8 @@ from collections.abc import Iterator
 
 import pytest
 
-from nav_sim.config import SimConfig
-from nav_sim.sim import NavSim
+from nav_sim.core.config import SimConfig
+from nav_sim.core.sim import NavSim
 
 
 @pytest.fixture(scope='module')

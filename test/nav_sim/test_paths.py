@@ -11,7 +11,7 @@ import pytest
 from ament_index_python.packages import get_package_prefix, get_package_share_directory
 
 from nav_sim.errors import WorldNotFoundError
-from nav_sim.paths import find_world
+from nav_sim.paths import executable_path, find_world
 
 
 @pytest.mark.parametrize('package', ['nav_sim', 'nav_gym', 'nav_eval'])
@@ -22,9 +22,11 @@ def test_packages_are_registered_in_the_ament_index(package):
 
 
 def test_ros2_run_resolves_the_sim_node_executable():
-    # ros2run: <get_package_prefix(pkg)>/lib/<pkg>/<executable>, which must be executable
+    # ros2run: <get_package_prefix(pkg)>/lib/<pkg>/<executable>, which must be executable;
+    # executable_path (what node_command starts) finds the same file
     path = Path(get_package_prefix('nav_sim')) / 'lib' / 'nav_sim' / 'sim_node'
     assert path.is_file() and os.access(path, os.X_OK)
+    assert executable_path('nav_sim', 'sim_node') == path
 
 
 def test_worlds_and_params_are_installed_in_share():
@@ -55,7 +57,8 @@ def test_params_file_lists_every_parameter_with_its_default():
 
     import yaml
 
-    from nav_sim.config import NodeConfig, SimConfig
+    from nav_sim.core.config import SimConfig
+    from nav_sim.ros.settings import NodeConfig
     share = Path(get_package_share_directory('nav_sim'))
     params = yaml.safe_load((share / 'config' / 'sim.yaml').read_text())['/**']['ros__parameters']
     fields = dataclasses.fields(SimConfig) + dataclasses.fields(NodeConfig)

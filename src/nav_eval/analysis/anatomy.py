@@ -7,7 +7,7 @@ share of decisions taken with the goal in view, how many of them drive forward, 
 the policy reverses between left and right).  A time-out whose goal came into view late is a
 search failure; one that saw the goal most of the time and reversed all along is an approach
 failure.  The goal is "in view" in an observation when the diagnosis's goal-marker mask
-(:func:`nav_gym.servo.goal_mask`) has at least ``MIN_PIXELS`` pixels: more
+(:func:`nav_gym.policy.servo.goal_mask`) has at least ``MIN_PIXELS`` pixels: more
 than the diagnosis needs to place a bearing, so that a sliver at the image edge does not count
 as found.
 
@@ -27,11 +27,11 @@ from typing import Any
 
 import numpy as np
 
-from nav_eval.analysis.metrics import OUTCOMES
-from nav_gym.actions import ACTION_NAMES
-from nav_gym.run_dir import frames_path
-from nav_gym.servo import goal_mask
-from nav_sim.geometry import ArenaGeometry, Layout, ObstacleShape, Placement, clearance
+from nav_gym.env.actions import ACTION_NAMES
+from nav_gym.policy.servo import goal_mask
+from nav_gym.training.run_dir import frames_path
+from nav_sim.core.events import OUTCOME_COLLISION, OUTCOMES
+from nav_sim.core.geometry import ArenaGeometry, Layout, ObstacleShape, Placement, clearance
 
 MIN_PIXELS = 10  # fewer green pixels than this is noise at the image edge, not the goal
 HIT_DIRECTIONS = 360  # points on the robot's rim tried for where a collision touched
@@ -85,10 +85,10 @@ def hit_bearing(trace: dict[str, Any], arena: dict[str, Any]) -> float | None:
 
     From the final pose and the scenario's true geometry (privileged, as evaluation records
     it): of ``HIT_DIRECTIONS`` points on the robot's rim, the one closest to a wall or an
-    obstacle (``nav_sim.geometry.clearance``).  None for other outcomes.  ``arena`` is an
+    obstacle (``nav_sim.core.geometry.clearance``).  None for other outcomes.  ``arena`` is an
     evaluation's ``results.json`` arena (half size, robot radius, the slots' shapes).
     """
-    if trace['outcome'] != 'collision' or not trace['steps']:
+    if trace['outcome'] != OUTCOME_COLLISION or not trace['steps']:
         return None
     x, y, yaw = (float(v) for v in trace['steps'][-1]['pose'][:3])
     geometry = ArenaGeometry(float(arena['half_size']), float(arena['robot_radius']), tuple(
@@ -107,7 +107,9 @@ def hit_bearing(trace: dict[str, Any], arena: dict[str, Any]) -> float | None:
 def traces_anatomy(traces: Iterable[tuple[Path, dict[str, Any]]],
                    arena: dict[str, Any] | None = None,
                    half_fov: float | None = None) -> list[EpisodeAnatomy]:
-    """Describe episodes from their ``(path, trace)`` pairs (:func:`nav_gym.run_dir.read_traces`).
+    """Describe episodes from their ``(path, trace)`` pairs.
+
+    The pairs are what :func:`nav_gym.training.run_dir.read_traces` yields.
 
     The frames are read beside each trace; an episode whose frames are missing or unreadable,
     or disagree with its trace, is left out.  With the evaluation's ``arena`` and the camera's
@@ -160,6 +162,6 @@ def summarise(episodes: Iterable[EpisodeAnatomy]) -> dict[str, dict[str, Any]]:
             if decisions else None,
             'hit_out_of_view': (sum(e.hit_out_of_view for e in group)
                                 if all(e.hit_out_of_view is not None for e in group)
-                                and outcome == 'collision' else None)}
+                                and outcome == OUTCOME_COLLISION else None)}
     return out
 

@@ -24,11 +24,12 @@ from typing import Any
 
 import numpy as np
 
-from nav_gym.run_dir import read_traces
+from nav_gym.training.run_dir import read_traces
+from nav_sim.core.events import OUTCOME_COLLISION, OUTCOME_SUCCESS
 
 #: decisions taken closer to the goal than this (m) form the "near" band: the final approach
 NEAR_GOAL = 0.25
-TERMINATED = ('success', 'collision')
+TERMINATED = (OUTCOME_SUCCESS, OUTCOME_COLLISION)
 
 
 @dataclass(frozen=True)
@@ -103,7 +104,7 @@ def traces_values(traces: Iterable[tuple[Path, dict[str, Any]]], reward: Any,
                   ) -> list[EpisodeValues]:
     """Describe the episodes of ``(path, trace)`` pairs, by seed.
 
-    The pairs are :func:`nav_gym.run_dir.read_traces`'s; a malformed trace is left out.
+    The pairs are :func:`nav_gym.training.run_dir.read_traces`'s; a malformed trace is left out.
     """
     out = []
     for _, trace in traces:

@@ -38,6 +38,8 @@ from typing import Any
 
 import numpy as np
 
+from nav_sim.core.events import EVENT_NONE
+
 TWIST_TOLERANCE = 1e-6  # m/s, rad/s: the sim's wheel -> twist round trip
 
 
@@ -47,7 +49,7 @@ class Tick:
 
     stamp_ns: int            # sim time: the stamp of the period's image and event
     published_ns: int        # wall clock: when the sim published the period's event
-    event: dict[str, Any]    # nav_sim.ros_msgs.parse_event of the event
+    event: dict[str, Any]    # nav_sim.ros.messages.parse_event of the event
 
 
 @dataclass(frozen=True)
@@ -115,7 +117,7 @@ def commands_in_effect(ticks: Sequence[Tick], decisions: Sequence[Decision], sin
 
 def _checkable(tick: Tick) -> bool:
     """Tell whether a period's reported twist is the command's (it did not end the episode)."""
-    return not tick.event.get('done') and tick.event.get('event') in ('none', None)
+    return not tick.event.get('done') and tick.event.get('event') in (EVENT_NONE, None)
 
 
 def _drove(tick: Tick, decision: Decision | None) -> bool:

@@ -14,10 +14,10 @@ from typing import Any
 import numpy as np
 
 from nav_eval.analysis import failure_layers as layers
-from nav_gym.config import EnvConfig
-from nav_gym.run_dir import MONITOR, read_monitor, truthy
-from nav_gym.servo import servo_band
-from nav_sim.config import SimConfig
+from nav_gym.env.config import EnvConfig
+from nav_gym.policy.servo import servo_band
+from nav_gym.training.run_dir import MONITOR, read_monitor, truthy
+from nav_sim.core.config import SimConfig
 
 
 def training_evidence(run_dir: Path, final_eps: float, tail: int = 50) -> dict | None:

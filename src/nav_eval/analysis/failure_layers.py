@@ -17,9 +17,10 @@ from typing import Any
 
 import numpy as np
 
-from nav_gym.actions import ACTION_NAMES
-from nav_gym.run_dir import EVAL_SETTINGS
-from nav_gym.servo import goal_bearing, servo_action
+from nav_gym.env.actions import ACTION_NAMES
+from nav_gym.policy.servo import goal_bearing, servo_action
+from nav_gym.training.run_dir import EVAL_SETTINGS
+from nav_sim.core.events import EVENT_COLLISION, EVENT_GOAL, EVENT_NONE, OUTCOME_COLLISION
 
 LAYERS = ('visual observation', 'action timing', 'reward', 'training / exploration',
           'evaluation')
@@ -106,7 +107,7 @@ def check_actions(steps: Sequence[dict], start_pose: Sequence[float], forward_st
         x, y, yaw = s['pose']
         moved = math.hypot(x - previous[0], y - previous[1])
         turned = _wrap(yaw - previous[2])
-        full = s['event'] == 'none'  # a goal/collision stops the period early
+        full = s['event'] == EVENT_NONE  # a goal/collision stops the period early
         name = ACTION_NAMES[s['action']]
         if name == 'forward':
             heading = math.atan2(y - previous[1], x - previous[0])
@@ -167,8 +168,8 @@ def check_reward(steps: Sequence[dict], initial_distance: float,
     for s in steps:
         expected = {'progress': weights['progress_weight'] * (previous - s['distance']),
                     'step': weights['step_penalty'],
-                    'goal': weights['goal_reward'] if s['event'] == 'goal' else 0.0,
-                    'collision': weights['collision_penalty'] if s['event'] == 'collision'
+                    'goal': weights['goal_reward'] if s['event'] == EVENT_GOAL else 0.0,
+                    'collision': weights['collision_penalty'] if s['event'] == EVENT_COLLISION
                     else 0.0}
         logged = s['reward_terms']
         if any(abs(expected[k] - logged.get(k, math.nan)) > 1e-4 for k in expected) or \
@@ -209,7 +210,7 @@ def check_policy(steps: Sequence[dict], frames: np.ndarray, outcome: str,
         spread = float(np.mean(arr.max(1) - arr.min(1)))
         v.note(f'mean Q {arr.mean():+.3f}, mean spread between best and worst action '
                f'{spread:.3f}')
-    if outcome == 'collision':
+    if outcome == OUTCOME_COLLISION:
         v.flag('suspect', 'the frozen policy drove into an obstacle or wall')
     if training:
         v.note(f"training: {training['episodes']} episodes, success rate over the last "

@@ -16,7 +16,13 @@ import math
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, fields
 
-OUTCOMES = ('success', 'collision', 'timeout')
+from nav_sim.core.events import (
+    EVENT_COLLISION,
+    EVENT_GOAL,
+    OUTCOME_COLLISION,
+    OUTCOME_SUCCESS,
+    OUTCOME_TIMEOUT,
+)
 
 
 @dataclass(frozen=True)
@@ -72,12 +78,12 @@ def spl(success: bool, shortest: float, path: float) -> float:
 
 def outcome_of(event: str, truncated: bool) -> str:
     """'success' (goal), 'collision' or 'timeout' (time limit without a terminal event)."""
-    if event == 'goal':
-        return 'success'
-    if event == 'collision':
-        return 'collision'
+    if event == EVENT_GOAL:
+        return OUTCOME_SUCCESS
+    if event == EVENT_COLLISION:
+        return OUTCOME_COLLISION
     if truncated:
-        return 'timeout'
+        return OUTCOME_TIMEOUT
     raise ValueError(f'episode ended without goal, collision or time limit (event={event!r})')
 
 
@@ -88,7 +94,7 @@ def episode_result(seed: int, split: str, event: str, truncated: bool, length: i
     outcome = outcome_of(event, truncated)
     return EpisodeResult(seed, split, outcome, length, episode_return, initial_distance,
                          final_distance, path_length,
-                         spl(outcome == 'success', initial_distance, path_length))
+                         spl(outcome == OUTCOME_SUCCESS, initial_distance, path_length))
 
 
 def summarize(episodes: Sequence[EpisodeResult]) -> SetSummary:
@@ -101,8 +107,8 @@ def summarize(episodes: Sequence[EpisodeResult]) -> SetSummary:
         return sum(e.outcome == outcome for e in episodes) / n
 
     return SetSummary(
-        episodes=n, success_rate=rate('success'), collision_rate=rate('collision'),
-        timeout_rate=rate('timeout'), mean_length=sum(e.length for e in episodes) / n,
+        episodes=n, success_rate=rate(OUTCOME_SUCCESS), collision_rate=rate(OUTCOME_COLLISION),
+        timeout_rate=rate(OUTCOME_TIMEOUT), mean_length=sum(e.length for e in episodes) / n,
         mean_spl=sum(e.spl for e in episodes) / n,
         mean_return=sum(e.episode_return for e in episodes) / n)
 

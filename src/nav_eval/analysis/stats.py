@@ -26,6 +26,8 @@ import numpy as np
 from rliable import library as rly
 from rliable import metrics as rlm
 
+from nav_sim.core.events import OUTCOME_SUCCESS
+
 RANDOM_STATE = 2021
 REPS = 10_000
 CONFIDENCE = 0.95
@@ -160,7 +162,7 @@ def probability_of_improvement(scores: Mapping[str, np.ndarray], reps: int = 2_0
     return {key: _estimate(points[key], intervals[key]) for key in pairs}
 
 
-def outcome_scores(episodes: Sequence[Mapping[str, Any]], outcome: str = 'success',
+def outcome_scores(episodes: Sequence[Mapping[str, Any]], outcome: str = OUTCOME_SUCCESS,
                    ) -> np.ndarray:
     """Turn episodes into a ``(episodes, 1)`` matrix of 1 (this outcome) / 0 (another)."""
     return score_matrix([1.0 if e['outcome'] == outcome else 0.0 for e in episodes])

@@ -16,9 +16,9 @@ from nav_eval.analysis import metrics
 from nav_eval.errors import EvaluationError
 from nav_eval.evaluation.policies import OraclePolicy, Policy, RandomPolicy, ServoPolicy
 from nav_eval.evaluation.runner import env_for_run, run_episode
-from nav_eval.evaluation.sets import BASELINE_POLICIES, SPLITS
-from nav_gym.train_config import TrainConfig
-from nav_sim.config import SimConfig
+from nav_eval.evaluation.sets import BASELINE_POLICIES
+from nav_gym.training.config import TrainConfig
+from nav_sim.core.config import HELDOUT, SPLITS, TRAIN, SimConfig
 
 
 def make_policy(name: str, config: TrainConfig) -> Policy:
@@ -38,7 +38,7 @@ def run_baselines(config: TrainConfig, train_seeds: tuple[int, ...],
                   policies: tuple[str, ...] = BASELINE_POLICIES,
                   progress: bool = False) -> dict[str, Any]:
     """Run every baseline policy on both banks; returns ``{'config': ..., 'sets': [...]}``."""
-    seeds = {'train': train_seeds, 'heldout': heldout_seeds}
+    seeds = {TRAIN: train_seeds, HELDOUT: heldout_seeds}
     env = env_for_run(config, record=False)
     sets = []
     try:

@@ -14,7 +14,7 @@ the same seeds), ``results.md``, ``episodes.csv``, per-episode traces and frames
 bag per set (with the policy's decisions); under ``RUN/eval_closed_loop`` by default.  A
 closed-loop trace step is one control period: the action the sim applied (-1, ``stop``: no
 command in effect), the decision's image stamp and the reward terms recomputed from the
-period's distance (:func:`nav_gym.env.reward_terms`).  Each closed-loop set also holds the
+period's distance (:func:`nav_gym.env.reward.reward_terms`).  Each closed-loop set also holds the
 decision-latency distribution and the checks of the reconstruction
 (:mod:`nav_eval.analysis.closed_loop`).
 """
@@ -47,16 +47,17 @@ from nav_eval.evaluation.runner import (
     write_results,
 )
 from nav_eval.evaluation.sets import SET_LABELS, EvalSet, run_config
-from nav_gym.actions import ACTION_NAMES
-from nav_gym.config import EnvConfig
-from nav_gym.env import reward_terms
-from nav_gym.observation import image_msg_to_observation
-from nav_gym.policy_process import PolicyProcess
-from nav_gym.run_dir import BAGS, CLOSED_LOOP, FINAL_MODEL
-from nav_gym.train_config import TrainConfig
+from nav_gym.env.actions import ACTION_NAMES
+from nav_gym.env.config import EnvConfig
+from nav_gym.env.observation import image_msg_to_observation
+from nav_gym.env.reward import reward_terms
+from nav_gym.policy.process import PolicyProcess
+from nav_gym.training.config import TrainConfig
+from nav_gym.training.run_dir import BAGS, CLOSED_LOOP, FINAL_MODEL
 from nav_sim import interface
-from nav_sim.config import SimConfig
-from nav_sim.sim_process import SimProcess
+from nav_sim.core.config import HELDOUT, TRAIN, SimConfig
+from nav_sim.core.events import TERMINAL_EVENTS
+from nav_sim.ros.process import SimProcess
 
 DEFAULT_RATES = (1.0, 4.0)
 START_TIMEOUT_S = 60.0   # for the sim and the policy node (torch) to start on a busy machine
@@ -101,7 +102,7 @@ def set_name(rate: float, split: str) -> str:
 def closed_loop_set(rate: float, split: str, seeds: tuple[int, ...],
                     checkpoint: str = FINAL_MODEL) -> EvalSet:
     """Return the closed-loop set of the final model at ``rate`` on ``seeds``."""
-    which = 'held-out' if split == 'heldout' else 'training'
+    which = 'held-out' if split == HELDOUT else 'training'
     return EvalSet(set_name(rate, split), f'DQN final, closed loop at {rate:g}x real time, '
                    f'{which} seeds', 'dqn', checkpoint, split, seeds)
 
@@ -149,7 +150,7 @@ def run_episode(graph: RealtimeGraph, seed: int, split: str, env: EnvConfig,
         terms = reward_terms(previous, distance, name, env)
         previous, reward = distance, float(sum(terms.values()))
         total += reward
-        terminated = name in ('goal', 'collision')
+        terminated = name in TERMINAL_EVENTS
         truncated = not terminated and int(event['episode_step']) >= loop.max_steps
         obs, rgb = image_msg_to_observation(period.image)
         frames.append(obs)
@@ -271,11 +272,11 @@ def evaluate_rate(run_dir: Path, config: TrainConfig, eval_set: EvalSet, rate: f
     recorder = None
     try:
         if record:
-            from nav_eval.recording.recorder import WITH_POLICY
             from nav_eval.recording.scene import BagSceneWriter
+            from nav_eval.recording.topics import WITH_POLICY
             recorder = open_recorder(
                 out / BAGS / eval_set.name, loop_graph.namespace,
-                lambda: graph.reset(0, 'train', loop.wait)[1].tick.stamp_ns,
+                lambda: graph.reset(0, TRAIN, loop.wait)[1].tick.stamp_ns,
                 lambda bag: bag.wait_for(0, loop.wait, (interface.DECISION_TOPIC,)),
                 topics=WITH_POLICY)
             observers.append(BagSceneWriter(recorder, config.sim_params))
@@ -349,8 +350,8 @@ def _live(port: int, config: TrainConfig) -> Any:
     """Return the closed loop's live view (the policy's decisions too), or None when off."""
     if not port:
         return None
-    from nav_gym.live_view import EnvLive
-    from nav_sim.live_topics import CLOSED_LOOP_TOPICS
+    from nav_gym.env.live_view import EnvLive
+    from nav_sim.viz.topics import CLOSED_LOOP_TOPICS
     live = EnvLive(port, config.sim_params, topics=CLOSED_LOOP_TOPICS)
     print(f'live view: open {live.url} in Foxglove', flush=True)
     return live

@@ -1,4 +1,4 @@
-"""Policies for evaluation: the learned one and the baselines.
+"""Policies for evaluation: the learned one and the baselines, on the one acting protocol.
 
 The frozen DQN (deterministic, with its Q-values), a seeded uniform-random baseline and a
 scripted visual servo act on the observation image only; for diagnosis, the frozen DQN with
@@ -11,30 +11,20 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
 from nav_eval.errors import EvaluationError
-from nav_gym.actions import action_twists
-from nav_gym.servo import servo_act, servo_band
-from nav_sim.planner import Planner
-from nav_sim.scenarios import build_banks, sample_scenario
-from nav_sim.world import load_arena
+from nav_gym.env.actions import action_twists
+from nav_gym.policy.actors import Actor, DQNActor, ServoActor
+from nav_sim.core.planner import Planner
+from nav_sim.core.scenarios import build_banks, sample_scenario
+from nav_sim.core.world import load_arena
 
-
-class Policy(Protocol):
-    """What evaluation needs of a policy: a name, an episode start and an action per image."""
-
-    name: str
-
-    def begin_episode(self, seed: int) -> None:
-        """Prepare for the episode of scenario ``seed``."""
-        ...
-
-    def act(self, observation: np.ndarray) -> tuple[int, list[float] | None]:
-        """Choose an action for an observation; also return Q-values if the policy has them."""
-        ...
+#: what evaluation needs of a policy: nav_gym's one acting protocol (an episode start, an
+#: action per image)
+Policy = Actor
 
 
 class RandomPolicy:
@@ -56,60 +46,18 @@ class RandomPolicy:
         return int(self._rng.integers(self.actions)), None
 
 
-class ServoPolicy:
-    """Turn toward the green goal pixels, drive when they are centred, else turn left.
-
-    A scripted image-only baseline, the probe of docs/experiments.md: it asks whether the task
-    is solvable from single images, and it measures how hard a scenario bank is without any
-    learning.
-    """
-
-    name = 'servo'
-
-    def __init__(self, band: float = 0.3) -> None:
-        """Drive when the goal centroid is within ``band`` of the image centre (-1..1 units)."""
-        self.band = band
-
-    @classmethod
-    def for_actions(cls, turn_rate: float, control_period: float,
-                    hfov_deg: float) -> ServoPolicy:
-        """Make a servo whose 'centred' band fits one turn step of these actions and camera."""
-        return cls(servo_band(turn_rate, control_period, hfov_deg))
-
-    def begin_episode(self, seed: int) -> None:
-        """Start an episode (the servo keeps no state)."""
-        return None
-
-    def act(self, observation: np.ndarray) -> tuple[int, list[float] | None]:
-        """Steer toward the goal's bearing in the image; turn left while it is not in view."""
-        return servo_act(observation, self.band), None
+#: the servo baseline, as the evaluation names it
+ServoPolicy = ServoActor
 
 
-class DQNPolicy:
-    """A frozen SB3 DQN: ``predict(deterministic=True)``, plus the Q-values it chose from."""
-
-    name = 'dqn'
+class DQNPolicy(DQNActor):
+    """The frozen DQN of a run's checkpoint, loaded for evaluation (greedy, with Q-values)."""
 
     def __init__(self, path: str | Path, device: str = 'cpu') -> None:
-        """Load the checkpoint at ``path`` onto ``device``."""
+        """Load the checkpoint at ``path`` onto ``device`` (EvaluationError if it cannot)."""
         self.path = Path(path)
         self.model = load_dqn(self.path, device)
-
-    def begin_episode(self, seed: int) -> None:
-        """Start an episode (the frozen network keeps no state)."""
-        return None
-
-    def q_values(self, observation: np.ndarray) -> np.ndarray:
-        """Return the network's Q-value of every action for one observation."""
-        import torch
-        tensor, _ = self.model.policy.obs_to_tensor(observation)
-        with torch.no_grad():
-            return self.model.q_net(tensor)[0].cpu().numpy()
-
-    def act(self, observation: np.ndarray) -> tuple[int, list[float] | None]:
-        """Take the greedy action; also return the Q-values it was chosen from."""
-        action, _ = self.model.predict(observation, deterministic=True)
-        return int(action), [round(float(q), 6) for q in self.q_values(observation)]
+        self.model.policy.set_training_mode(False)
 
 
 class ExploringDQNPolicy(DQNPolicy):
@@ -147,7 +95,7 @@ def load_dqn(path: Path, device: str = 'cpu') -> Any:
     """Load a DQN checkpoint for inference, or raise EvaluationError saying what to do."""
     import zipfile
 
-    from nav_gym.learner import load_checkpoint
+    from nav_gym.training.learner import load_checkpoint
     if not path.is_file():
         raise EvaluationError(f'checkpoint {path} not found; train first with '
                               '`ros2 run nav_gym train` or pass --checkpoint')
@@ -162,12 +110,12 @@ def load_dqn(path: Path, device: str = 'cpu') -> Any:
 class OraclePolicy:
     """Drive a plan made on the true map with the env's three actions: the task's ceiling.
 
-    A privileged evaluation baseline (:mod:`nav_sim.planner`): from the scenario's exact layout,
-    start and goal it plans the fewest actions that reach the goal within the episode limit, and
-    replans from the robot's true pose whenever the pose is not where the plan put it.  It asks
-    how many scenarios the actions, the decision period and the step limit can solve at all;
-    where it finds no plan it turns left, and its episode times out.  The runner tells it the
-    env's ``info`` after the reset and every step (:meth:`follow`); it ignores the image.
+    A privileged evaluation baseline (:mod:`nav_sim.core.planner`): from the scenario's exact
+    layout, start and goal it plans the fewest actions that reach the goal within the episode
+    limit, and replans from the robot's true pose whenever the pose is not where the plan put
+    it.  It asks how many scenarios the actions, the decision period and the step limit can solve
+    at all; where it finds no plan it turns left, and its episode times out.  The runner tells it
+    the env's ``info`` after the reset and every step (:meth:`follow`); it ignores the image.
     """
 
     name = 'oracle'

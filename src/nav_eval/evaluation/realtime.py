@@ -1,6 +1,6 @@
 """The closed-loop evaluation's view of a realtime sim driven by the policy node (rclpy).
 
-A :class:`RealtimeGraph` is a client of the sim's services (:class:`nav_sim.client.SimClient`:
+A :class:`RealtimeGraph` is a client of the sim's services (:class:`nav_sim.ros.client.SimClient`:
 seed and split, ``reset``, ``stop``) that publishes nothing: the policy node drives.  It
 subscribes, with queues deep enough to lose nothing between two looks, to every period's
 ``episode_event`` and ``camera/image_raw`` and to every ``policy/decision``, and keeps each with
@@ -22,8 +22,11 @@ from sensor_msgs.msg import Image, JointState
 
 from nav_eval.analysis.closed_loop import Decision, Tick
 from nav_eval.errors import EvaluationError
-from nav_sim import interface, live_topics, qos, ros_msgs
-from nav_sim.client import SimClient
+from nav_sim import interface
+from nav_sim.ros import messages as ros_msgs
+from nav_sim.ros import qos
+from nav_sim.ros.client import SimClient
+from nav_sim.viz import topics as live_topics
 
 QUEUE_DEPTH = 200  # messages a subscription holds between two looks (seconds at any rate)
 SPIN_S = 0.05

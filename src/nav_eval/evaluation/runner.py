@@ -23,9 +23,10 @@ from nav_eval.errors import EvaluationError
 from nav_eval.evaluation.policies import DQNPolicy, ExploringDQNPolicy, Policy, RandomPolicy
 from nav_eval.evaluation.sets import EvalSet, run_config
 from nav_eval.seeds import seed_range
-from nav_gym.env import NavigationEnv
+from nav_gym.env.navigation import NavigationEnv
 from nav_gym.errors import TrainConfigError
-from nav_gym.run_dir import (
+from nav_gym.training.config import TrainConfig
+from nav_gym.training.run_dir import (
     BAGS,
     EPISODES_CSV,
     EVAL,
@@ -35,9 +36,10 @@ from nav_gym.run_dir import (
     frames_path,
     trace_path,
 )
-from nav_gym.train_config import TrainConfig
 from nav_sim import interface
-from nav_sim.world import load_arena
+from nav_sim.core.config import TRAIN
+from nav_sim.core.events import EVENT_NONE
+from nav_sim.core.world import load_arena
 
 #: where the sim was when the episode started (not part of the scenario; the bag has them)
 SIM_COUNTERS = ('episode', 'period', 'stamp_ns')
@@ -56,7 +58,7 @@ def run_episode(env: NavigationEnv, policy: Policy, seed: int, split: str,
     if follow is not None:
         follow(info)
     frames, steps = [obs], []
-    total, truncated, event = 0.0, False, 'none'
+    total, truncated, event = 0.0, False, EVENT_NONE
     step_info: dict[str, Any] = {'distance': info['distance'], 'path_length': 0.0}
     while True:
         action, q_values = policy.act(obs)
@@ -217,7 +219,7 @@ def _open_recorder(path: Path, env: NavigationEnv, timeout: float = 10.0) -> Any
     # cmd_vel is the env's own publisher: it delivers to the recorder once it has matched the
     # recorder's subscription (the sim's subscription is the other one)
     commands = env.client.pub_cmd
-    return open_recorder(path, env.namespace, lambda: env.client.reset(0, 'train')[0].stamp_ns,
+    return open_recorder(path, env.namespace, lambda: env.client.reset(0, TRAIN)[0].stamp_ns,
                          lambda _: commands.get_subscription_count() >= 2, timeout)
 
 

@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 
 from nav_eval.errors import DiagnosisError
-from nav_gym.run_dir import RESULTS, TRACES, frames_path, trace_path
+from nav_gym.training.run_dir import RESULTS, TRACES, frames_path, trace_path
+from nav_sim.core.events import OUTCOME_SUCCESS
 
 # the final model's failures first; if it fails nowhere, the early checkpoint's
 SEARCH_ORDER = ('dqn_heldout', 'dqn_train', 'early_heldout', 'early_train')
@@ -27,7 +28,7 @@ def pick_episode(eval_dir: Path, set_name: str | None, seed: int | None) -> tupl
             raise DiagnosisError(f'no evaluation set {name!r} in {results_path}; have '
                                  f'{sorted(sets)}')
         for e in sets[name]['episodes']:
-            if (seed is None and e['outcome'] != 'success') or e['seed'] == seed:
+            if (seed is None and e['outcome'] != OUTCOME_SUCCESS) or e['seed'] == seed:
                 return name, e['seed']
     if seed is not None:
         raise DiagnosisError(f'seed {seed} is not in set(s) {names}')

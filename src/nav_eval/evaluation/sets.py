@@ -7,9 +7,9 @@ from pathlib import Path
 
 from nav_eval.errors import EvaluationError
 from nav_gym.errors import TrainConfigError
-from nav_gym.run_dir import FINAL_MODEL, checkpoints, load_config
-from nav_gym.train_config import TrainConfig
-from nav_sim.config import normalise_split
+from nav_gym.training.config import TrainConfig
+from nav_gym.training.run_dir import FINAL_MODEL, checkpoints, load_config
+from nav_sim.core.config import TRAIN, normalise_split
 
 SET_LABELS = {
     'random_train': 'Random policy, training seeds', 'dqn_train': 'DQN final, training seeds',
@@ -22,7 +22,7 @@ SET_LABELS = {
 DEFAULT_SETS = ('random_train', 'dqn_train', 'dqn_heldout', 'early_train', 'early_heldout')
 #: the baselines of a sweep's configurations, each on both splits (``<policy>_<split>`` sets)
 BASELINE_POLICIES = ('random', 'servo', 'oracle')
-SPLITS = ('train', 'heldout')
+
 #: evaluation set kind (its name's first word) -> the policy that plays it
 SET_POLICIES = {'random': 'random', 'dqn': 'dqn', 'early': 'dqn', 'explore': 'explore'}
 
@@ -66,7 +66,7 @@ def plan_sets(run_dir: Path, names: list[str], train_seeds: tuple[int, ...],
     for name in names:
         kind, split_name = name.split('_')
         split = normalise_split(split_name)
-        seeds = train_seeds if split == 'train' else heldout_seeds
+        seeds = train_seeds if split == TRAIN else heldout_seeds
         if kind == 'early' and early is None:
             print(f'skipping {name}: the run has no checkpoint after step 0')
             continue

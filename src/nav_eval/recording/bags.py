@@ -10,7 +10,7 @@ Finding episodes in a bag:
   last frame; :func:`episodes_in_bag` returns them in order.  The always-absolute topic name keeps
   them in one place whatever namespace the sim ran in.
 * ``<ns>/episode_event``: one DiagnosticArray per control period (status ``nav_sim/episode``, see
-  :mod:`nav_sim.ros_msgs`).  Its message is ``reset`` on an episode's first frame (key/values
+  :mod:`nav_sim.ros.messages`).  Its message is ``reset`` on an episode's first frame (key/values
   ``episode``, ``seed``, ``split``), ``goal`` or ``collision`` on a terminal frame (``done`` is
   True) and ``none`` otherwise.  Every message of one control period shares the stamp, so the
   messages from one ``reset`` stamp up to (not including) the next belong to one episode;
@@ -27,7 +27,9 @@ from typing import Any
 
 from rosbags.rosbag2 import Reader
 
-from nav_sim import interface, live_topics, ros_msgs
+from nav_sim import interface
+from nav_sim.ros import messages as ros_msgs
+from nav_sim.viz import topics as live_topics
 
 BAG_VERSION = 9            # the rosbag2 metadata version ROS 2 Jazzy writes
 IMAGE_TOPIC = interface.IMAGE_TOPIC
@@ -39,7 +41,7 @@ PERIOD_TOPICS = (IMAGE_TOPIC, interface.CAMERA_INFO_TOPIC, interface.ODOM_TOPIC,
 #: topics every nav_sim node publishes
 SIM_TOPICS = (*PERIOD_TOPICS, interface.GOAL_TOPIC)
 
-#: ROS 2 Jazzy types plus the live view's visnav_msgs types (nav_sim.live_topics)
+#: ROS 2 Jazzy types plus the live view's visnav_msgs types (nav_sim.viz.topics)
 TYPESTORE = live_topics.TYPESTORE  # Jazzy's types and visnav's own (one typestore)
 
 
@@ -81,7 +83,7 @@ def episodes_in_bag(path: str | Path) -> list[dict[str, Any]]:
 def episode_events(path: str | Path) -> list[tuple[int, dict[str, Any]]]:
     """(timestamp_ns, event dict) of every ``*/episode_event`` message, in time order.
 
-    The dicts are :func:`nav_sim.ros_msgs.parse_event`'s: ``event`` (``reset``, ``none``,
+    The dicts are :func:`nav_sim.ros.messages.parse_event`'s: ``event`` (``reset``, ``none``,
     ``goal``, ``collision``) plus ``topic`` and the counters (``episode``, ``seed``, ...).
     """
     with Reader(path) as reader:

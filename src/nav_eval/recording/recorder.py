@@ -18,13 +18,9 @@ policy node (``ros2 run nav_gym policy``) publishes besides ``cmd_vel``:
     <ns>/policy/decision      sensor_msgs/msg/JointState (stamped with the decided image's stamp)
 
 The bag is rosbag2 version 9 (what Jazzy writes); ``metadata.yaml`` appears when the recorder is
-closed.  Bag timestamps are sim time, so a recording of a seeded run is reproducible: the header
-stamp (the Clock's value on ``/clock``) of every stamped message; for ``cmd_vel``, which has no
-header, and for annotations, the newest sim stamp seen so far (in lockstep that is normally the
-stamp of the observation the command answers).  Unstamped messages that arrive before any sim
-stamp wait for the first one; if none comes within ``HOLD_S``, they (and later unstamped ones)
-get wall-clock time.  Timestamps never decrease within a topic, so record one sim run per bag:
-a restarted sim starts its clock again at zero.
+closed.  Bag timestamps are sim time (:class:`nav_eval.recording.timestamps.StampPolicy`), so a
+recording of a seeded run is reproducible; record one sim run per bag: a restarted sim starts
+its clock again at zero.  The topics are :mod:`nav_eval.recording.topics`.
 
 Connecting takes a moment: :meth:`BagRecorder.wait_for_publishers` says when the recorder has
 matched the sim's publishers, but the sim can match the recorder's subscriptions a few hundred
@@ -44,15 +40,11 @@ import shutil
 import threading
 import time
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
 from typing import Any
 
 import rclpy
-from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped, Twist
-from nav_msgs.msg import Odometry
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile
@@ -61,15 +53,8 @@ from rclpy.subscription import Subscription
 from rosbags.interfaces import (
     Connection,
     Qos,
-    QosDurability,
-    QosHistory,
-    QosLiveliness,
-    QosReliability,
-    QosTime,
 )
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer, WriterError
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import CameraInfo, Image, JointState
 
 from nav_eval.errors import RecordingError
 from nav_eval.recording.bags import (
@@ -81,54 +66,16 @@ from nav_eval.recording.bags import (
     TYPESTORE,
     cdr_stamp_ns,
 )
-from nav_sim import interface, qos
+from nav_eval.recording.timestamps import Placed, StampPolicy
+from nav_eval.recording.topics import TOPICS, RecordedTopic, bag_qos
+from nav_sim import interface
 
 _log = logging.getLogger(__name__)
 
 QUEUE_DEPTH = 50           # subscriber queue: a briefly slow recorder loses nothing
 SPIN_TIMEOUT_S = 0.1       # how soon the recording thread notices close()
 DRAIN_S = 0.5              # at close, write what already arrived for at most this long
-HOLD_S = 10.0              # unstamped messages wait this long for a first sim stamp ...
-HOLD_MAX = 1000            # ... or until this many are waiting
 POLL_S = 0.02
-_NEVER = 2**63            # the start stamp of a paused recorder
-
-
-@dataclass(frozen=True)
-class RecordedTopic:
-    """One topic the recorder subscribes to."""
-
-    name: str             # relative to the namespace (absolute for /clock)
-    msgtype: str          # ROS 2 type name, as stored in the bag
-    msg_class: type       # rclpy message class to subscribe with
-    profile: QoSProfile   # what the publisher offers (nav_sim.qos); the recorder queues deeper
-    stamped: bool         # starts with a builtin_interfaces/Time (header stamp, Clock value)
-
-
-TOPICS = (
-    RecordedTopic(IMAGE_TOPIC, 'sensor_msgs/msg/Image', Image, qos.OBSERVATION, True),
-    RecordedTopic(interface.CAMERA_INFO_TOPIC, 'sensor_msgs/msg/CameraInfo', CameraInfo,
-                  qos.OBSERVATION, True),
-    RecordedTopic(interface.ODOM_TOPIC, 'nav_msgs/msg/Odometry', Odometry, qos.OBSERVATION,
-                  True),
-    RecordedTopic(interface.GOAL_TOPIC, 'geometry_msgs/msg/PoseStamped', PoseStamped,
-                  qos.LATCHED, True),
-    RecordedTopic(interface.EVENT_TOPIC, 'diagnostic_msgs/msg/DiagnosticArray', DiagnosticArray,
-                  qos.OBSERVATION, True),
-    RecordedTopic(interface.CMD_VEL_TOPIC, 'geometry_msgs/msg/Twist', Twist, qos.CONTROL, False),
-    RecordedTopic(interface.CLOCK_TOPIC, 'rosgraph_msgs/msg/Clock', Clock, qos.CLOCK, True),
-)
-#: the sim's topics and the policy node's decisions
-WITH_POLICY = (*TOPICS, RecordedTopic(interface.DECISION_TOPIC, 'sensor_msgs/msg/JointState',
-                                      JointState, qos.DECISIONS, True))
-
-
-def bag_qos(profile: QoSProfile) -> Qos:
-    """Return the rosbags form of an rclpy QoS profile (durations left at the default)."""
-    default = QosTime(0, 0)
-    return Qos(QosHistory(profile.history.value), profile.depth,
-               QosReliability(profile.reliability.value), QosDurability(profile.durability.value),
-               default, default, QosLiveliness(profile.liveliness.value), default, False)
 
 
 def _json_value(value: Any) -> Any:
@@ -168,15 +115,11 @@ class BagRecorder:
                                  'overwritten: choose a new output directory or remove it')
         self._cond = threading.Condition(threading.Lock())
         self._counts: dict[str, int] = {}
-        self._last_ns: dict[int, int] = {}
-        self._sim_ns: int | None = None
         self._ids: dict[str, int] = {}          # topic name as in TOPICS -> connection id
-        self._stamp_ns: dict[int, int] = {}     # connection id -> newest header stamp written
+        self._connections: dict[int, Connection] = {}  # connection id -> connection
         self._received = 0
-        self._held: list[tuple[Connection, bytes, int]] = []  # unstamped, before any sim stamp
-        self._wall_clock = False  # no sim stamp in time: unstamped messages get wall-clock time
-        # paused: messages stamped before this are only noted for wait_for (see start())
-        self._start_ns = _NEVER if paused else 0
+        # paused: messages stamped before the start are only noted for wait_for (see start())
+        self._stamps = StampPolicy(paused)
         self._failure: BaseException | None = None
         self._closed = False
         self._stop = threading.Event()
@@ -230,6 +173,7 @@ class BagRecorder:
         connection = self._writer.add_connection(topic, msgtype, typestore=TYPESTORE,
                                                  offered_qos_profiles=profiles)
         self._counts[topic] = 0
+        self._connections[connection.id] = connection
         return connection
 
     def _abandon(self) -> None:
@@ -264,60 +208,23 @@ class BagRecorder:
 
     def _write(self, connection: Connection, data: bytes | memoryview,
                stamp_ns: int | None) -> None:
-        """Write one message at its sim stamp, or the newest sim stamp if it has none.
-
-        Unstamped messages that come before any sim stamp wait for the first one (for at most
-        ``HOLD_S`` or ``HOLD_MAX`` messages; after that, unstamped ones get wall-clock time).
-        """
+        """Write one message when the timestamp policy says (:mod:`.timestamps`)."""
         with self._cond:
             if self._writer is None:
                 return
-            if self._start_ns and self._skip(connection, stamp_ns):
-                return
-            if stamp_ns is None:
-                if self._sim_ns is None and not self._wall_clock:
-                    self._hold(connection, data)
-                    return
-                self._put(connection, time.time_ns() if self._wall_clock else self._sim_ns,
-                          data)
-                return
-            if self._sim_ns is None:
-                self._sim_ns = stamp_ns
-                self._release_held(stamp_ns)
-            self._sim_ns = max(self._sim_ns, stamp_ns)
-            self._put(connection, stamp_ns, data)
-            self._stamp_ns[connection.id] = max(stamp_ns, self._stamp_ns.get(connection.id, 0))
-            self._cond.notify_all()
+            # an unstamped message may be held: keep a copy of a reused receive buffer
+            placed = self._stamps.place(connection.id, bytes(data) if stamp_ns is None
+                                        else data, stamp_ns)
+            self._put(placed)
+            if stamp_ns is not None:
+                self._cond.notify_all()
 
-    def _skip(self, connection: Connection, stamp_ns: int | None) -> bool:
-        """Note (for wait_for) but do not write what comes before the start (see start())."""
-        if stamp_ns is None:
-            return self._sim_ns is None or self._sim_ns < self._start_ns
-        if stamp_ns >= self._start_ns:
-            return False
-        self._stamp_ns[connection.id] = max(stamp_ns, self._stamp_ns.get(connection.id, 0))
-        self._cond.notify_all()
-        return True
-
-    def _put(self, connection: Connection, when: int, data: bytes | memoryview) -> None:
+    def _put(self, placed: list[Placed]) -> None:
         assert self._writer is not None
-        when = max(when, self._last_ns.get(connection.id, 0))  # monotonic per topic
-        self._writer.write(connection, when, data)
-        self._last_ns[connection.id] = when
-        self._counts[connection.topic] += 1
-
-    def _hold(self, connection: Connection, data: bytes | memoryview) -> None:
-        self._held.append((connection, bytes(data), time.time_ns()))
-        if (len(self._held) >= HOLD_MAX
-                or self._held[-1][2] - self._held[0][2] > HOLD_S * 1_000_000_000):
-            self._wall_clock = True
-            self._release_held(None)
-
-    def _release_held(self, stamp_ns: int | None) -> None:
-        """Write the held messages at ``stamp_ns``, or at their arrival times if None."""
-        for connection, data, wall_ns in self._held:
-            self._put(connection, wall_ns if stamp_ns is None else stamp_ns, data)
-        self._held.clear()
+        for key, when, data in placed:
+            connection = self._connections[key]
+            self._writer.write(connection, when, data)
+            self._counts[connection.topic] += 1
 
     # --- public API -----------------------------------------------------------------------
     @property
@@ -360,7 +267,7 @@ class BagRecorder:
             raise ValueError('cmd_vel has no stamp to wait for')
 
         def arrived() -> bool:
-            return all(self._stamp_ns.get(i, -1) >= stamp_ns for i in ids)
+            return all(self._stamps.newest(i) >= stamp_ns for i in ids)
 
         with self._cond:
             self._cond.wait_for(lambda: arrived() or self._failure is not None
@@ -377,7 +284,7 @@ class BagRecorder:
         Unstamped messages are written once a message stamped ``from_ns`` or later arrived.
         """
         with self._cond:
-            self._start_ns = from_ns
+            self._stamps.start(from_ns)
 
     def annotate(self, info: Mapping[str, Any]) -> None:
         """Write ``json.dumps(info)`` as a std_msgs/String on ``/visnav/episode``.
@@ -436,7 +343,8 @@ class BagRecorder:
         self._closed = True
         self._stop_node()
         with self._cond:
-            self._release_held(None)
+            if self._writer is not None:
+                self._put(self._stamps.flush())
             writer, self._writer = self._writer, None
             self._cond.notify_all()
         if writer is not None:

@@ -14,9 +14,9 @@ from typing import Any
 
 import numpy as np
 
-from nav_gym.observers import EpisodeObserver
-from nav_sim import live_topics
-from nav_sim.live_topics import OBSERVATION_TOPIC, ROBOT_TOPIC, SCENE_TOPIC, STEP_TOPIC
+from nav_gym.env.observers import EpisodeObserver
+from nav_sim.viz import topics as live_topics
+from nav_sim.viz.topics import OBSERVATION_TOPIC, ROBOT_TOPIC, SCENE_TOPIC, STEP_TOPIC
 
 
 class BagSceneWriter(EpisodeObserver):

@@ -11,7 +11,7 @@ import time
 
 from nav_eval.recording.bags import PERIOD_TOPICS
 from nav_eval.recording.recorder import BagRecorder
-from nav_sim.stop_request import StopRequest
+from nav_sim.ros.stop_request import StopRequest
 
 TICK_S = 0.1
 NOTICE_S = 5.0

@@ -13,6 +13,7 @@ from __future__ import annotations
 from typing import Any
 
 from nav_eval.reporting.format import num, pct, table
+from nav_sim.core.events import OUTCOME_SUCCESS
 
 COMPARISON = ('Set', 'Rate', 'Episodes', 'Success', 'Δ success vs lockstep', 'Collision',
               'Timeout', 'Mean length', 'Mean SPL', 'Outcome changed (seeds)')
@@ -90,8 +91,9 @@ def gap_notes(lockstep: dict[str, Any], loops: list[dict[str, Any]]) -> list[str
     notes = []
     for entry in loops:
         after = _outcomes(entry)
-        lost = sorted(s for s, o in after.items() if before.get(s) == 'success' and o != 'success')
-        won = sorted(s for s, o in after.items() if before.get(s) != 'success' and o == 'success')
+        succeeded = {s for s, o in before.items() if o == OUTCOME_SUCCESS}
+        lost = sorted(s for s, o in after.items() if s in succeeded and o != OUTCOME_SUCCESS)
+        won = sorted(s for s, o in after.items() if s not in succeeded and o == OUTCOME_SUCCESS)
         lat = entry.get('latency', {})
         periods = lat.get('periods', {})
         on_time = float(periods.get('0', 0.0))

@@ -19,8 +19,9 @@ from nav_eval.evaluation.runner import rerun
 from nav_eval.evaluation.selection import load_episode, pick_episode
 from nav_eval.evaluation.sets import run_config
 from nav_eval.reporting import plots
-from nav_gym.actions import ACTION_NAMES, action_label
-from nav_gym.run_dir import (
+from nav_gym.env.actions import ACTION_NAMES, action_label
+from nav_gym.policy.servo import goal_bearing
+from nav_gym.training.run_dir import (
     DIAGNOSIS,
     DIAGNOSIS_TEXT,
     EVAL,
@@ -28,8 +29,7 @@ from nav_gym.run_dir import (
     RESULTS,
     eval_settings,
 )
-from nav_gym.servo import goal_bearing
-from nav_sim.config import SimConfig
+from nav_sim.core.config import SimConfig
 
 
 def step_table(trace: dict, frames: np.ndarray) -> str:

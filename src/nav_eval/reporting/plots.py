@@ -1,12 +1,12 @@
 """Report figures: training curves, top-down trajectories and camera contact sheets.
 
 Pure matplotlib (``Agg`` backend) on the files a run directory holds; no ROS, no MuJoCo.  Every
-figure function writes a PNG and returns its path.  Geometry follows ``nav_sim.scenarios``: the
-arena is the square ``[-half_size, half_size]^2`` with the interior walls ``arena['walls']``
+figure function writes a PNG and returns its path.  Geometry follows ``nav_sim.core.scenarios``:
+the arena is the square ``[-half_size, half_size]^2`` with the interior walls ``arena['walls']``
 (axis-aligned boxes: centre x, y and half extents); obstacle slot ``i`` has the footprint
 ``arena['shapes'][i]`` (a box with half extents ``half_x``, ``half_y`` rotated by the placement's
 yaw, or a cylinder of radius ``half_x``).  A scenario with a drawn look (``scenario['look']``,
-``nav_sim.looks``) is drawn in its floor, wall and obstacle colours.
+``nav_sim.core.looks``) is drawn in its floor, wall and obstacle colours.
 """
 
 from __future__ import annotations
@@ -18,6 +18,14 @@ from typing import Any
 
 import matplotlib
 
+from nav_sim.core.events import (
+    EVENT_COLLISION,
+    EVENT_NONE,
+    OUTCOME_COLLISION,
+    OUTCOME_SUCCESS,
+    OUTCOME_TIMEOUT,
+)
+
 matplotlib.use('Agg')
 
 import matplotlib.pyplot as plt  # noqa: E402
@@ -26,18 +34,19 @@ from matplotlib.axes import Axes  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.patches import Circle, Polygon, Rectangle  # noqa: E402
 
-from nav_gym.actions import action_label  # noqa: E402
-from nav_gym.run_dir import MONITOR, checkpoints, read_monitor, truthy  # noqa: E402
+from nav_gym.env.actions import action_label  # noqa: E402
+from nav_gym.training.run_dir import MONITOR, checkpoints, read_monitor, truthy  # noqa: E402
 
 DPI = 100
-OUTCOME_COLOURS = {'success': 'tab:green', 'collision': 'tab:red', 'timeout': 'tab:orange'}
+OUTCOME_COLOURS = {OUTCOME_SUCCESS: 'tab:green', OUTCOME_COLLISION: 'tab:red',
+                   OUTCOME_TIMEOUT: 'tab:orange'}
 
 
 def monitor_arrays(path: Path) -> dict[str, np.ndarray]:
     """Read the episodes of an SB3 Monitor CSV as arrays.
 
-    ``r``, ``l``, ``t``, ``steps`` (cumulative ``l``) and, when logged, ``is_success`` (0/1)
-    and ``event``; parsed by :func:`nav_gym.run_dir.read_monitor` (its columns of strings).
+    ``r``, ``l``, ``t``, ``steps`` (cumulative ``l``) and, when logged, ``is_success`` (0/1) and
+    ``event``; parsed by :func:`nav_gym.training.run_dir.read_monitor` (its columns of strings).
     """
     columns = read_monitor(path)
     data = {key: np.array([float(v) for v in columns.get(key, [])]) for key in ('r', 'l', 't')}
@@ -86,7 +95,7 @@ def training_curves(run_dir: Path, out: Path) -> Path:
         axes[2].plot(steps, 100 * rolling_mean(data['is_success'], window), color='tab:green',
                      lw=2, label='success')
         if 'event' in data:
-            collided = (data['event'] == 'collision').astype(float)
+            collided = (data['event'] == EVENT_COLLISION).astype(float)
             axes[2].plot(steps, 100 * rolling_mean(collided, window), color='tab:red', lw=2,
                          label='collision')
         axes[2].set_ylabel(f'rate over {window} episodes (%)')
@@ -273,8 +282,8 @@ def frame_labels(steps: Sequence[dict[str, Any]]) -> list[str]:
     for number, step in enumerate(steps, start=1):
         name = str(step.get('action_name', step.get('action', '')))
         text = f"step {step.get('step', number)} {action_label(name)}"
-        event = step.get('event', 'none')
-        labels.append(text if event in ('none', None) else f'{text} {event}')
+        event = step.get('event', EVENT_NONE)
+        labels.append(text if event in (EVENT_NONE, None) else f'{text} {event}')
     return labels
 
 

@@ -1,4 +1,4 @@
-"""A run's result report (Markdown + self-contained HTML) with its figures and videos.
+"""A run's result report: its sections as text, and Result.md/Result.html written from them.
 
 Reads what the other commands left in RUN_DIR (validation.json, summary.json, monitor.csv,
 checkpoints/, eval/results.json, eval/traces/, eval/diagnosis.*, eval_closed_loop/results.json)
@@ -11,22 +11,15 @@ written; one whose input is missing says which command produces it.
 from __future__ import annotations
 
 import json
-import re
-import shutil
-from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
-from nav_eval.errors import DiagnosisError, ReportError
-from nav_eval.evaluation.selection import pick_episode
 from nav_eval.reporting import plots, videos
 from nav_eval.reporting.closed_loop import section_closed_loop
 from nav_eval.reporting.format import (
-    IMAGE_RE,
     details,
     display_path,
     duration,
@@ -38,29 +31,21 @@ from nav_eval.reporting.format import (
     to_html,
     video_link,
 )
-from nav_gym.run_dir import (
-    CLOSED_LOOP,
-    CONFIG,
-    DIAGNOSIS,
+from nav_eval.reporting.run_figures import MALFORMED, Figures, draw_figures
+from nav_eval.reporting.run_inputs import Run, dqn_sets_for_examples, final_set, load_run
+from nav_eval.reporting.videos import Clips, write_run_videos
+from nav_gym.training.config import learner_of
+from nav_gym.training.run_dir import (
     DIAGNOSIS_TEXT,
     EVAL,
-    FIGURES,
     FINAL_MODEL,
     MONITOR,
-    REPORT,
     REPORT_TEXT,
-    RESULTS,
-    RUN_MARKERS,
-    SUMMARY,
-    VALIDATION,
     VIDEOS,
-    frames_path,
-    is_run_dir,
     parse_checkpoint_name,
-    read_traces,
     run_settings,
 )
-from nav_gym.train_config import learner_of
+from nav_sim.core.config import HELDOUT, TRAIN
 
 SECTIONS = ('1. Observation and action checks', '2. Training',
             '3. Early vs final checkpoint comparison', '4. Evaluation',
@@ -74,60 +59,6 @@ HYPERPARAMETERS = ('double_q', 'n_steps', 'dueling', 'augment_shift', 'prioritiz
                    'turn_rate', 'turn_speed', 'sim_params')
 EVAL_COLUMNS = ('Set', 'Policy', 'Split', 'Episodes', 'Success rate', 'Collision rate',
                 'Timeout rate', 'Mean length', 'Mean SPL', 'Mean return')
-
-
-@dataclass
-class Run:
-    """A run directory's inputs, each None when missing or unreadable (``problems`` says)."""
-
-    path: Path
-    figures: Path
-    shown: str
-    summary: dict[str, Any] | None = None
-    config: dict[str, Any] | None = None
-    validation: list[dict[str, Any]] | None = None
-    results: dict[str, Any] | None = None
-    closed_loop: dict[str, Any] | None = None
-    diagnosis: dict[str, Any] | None = None
-    problems: list[str] = field(default_factory=list)
-
-    def read(self, relative: str) -> Any:
-        """Load a JSON or YAML file of the run; None if absent, noted in ``problems`` if bad."""
-        path = self.path / relative
-        if not path.is_file():
-            return None
-        try:
-            text = path.read_text()
-            return yaml.safe_load(text) if path.suffix == '.yaml' else json.loads(text)
-        except (OSError, ValueError, yaml.YAMLError) as exc:
-            self.problems.append(f'`{relative}` could not be read ({type(exc).__name__}: {exc})')
-            return None
-
-    def sets(self) -> list[dict[str, Any]]:
-        """Return the evaluated sets of ``eval/results.json`` (empty when there are none)."""
-        return list((self.results or {}).get('sets', []))
-
-    def figure(self, name: str) -> tuple[Path, str]:
-        """Where a figure is written and how Result.md refers to it."""
-        return self.figures / name, f'{FIGURES}/{name}'
-
-
-def load_run(run_dir: Path) -> Run:
-    """Read a run directory's inputs; raise ReportError if it is not a run directory."""
-    run_dir = Path(run_dir)
-    if not is_run_dir(run_dir):
-        raise ReportError(f'{run_dir} is not a run directory (it has none of '
-                          f'{", ".join(RUN_MARKERS)}); pass the directory nav-gym-train created, '
-                          'e.g. runs/dqn_20261122_101500')
-    run = Run(run_dir, run_dir / REPORT / FIGURES,
-              display_path(run_dir, f'runs/{run_dir.resolve().name}'))
-    run.summary = run.read(SUMMARY)
-    run.config = (run.summary or {}).get('config') or run.read(CONFIG)
-    run.validation = run.read(VALIDATION)
-    run.results = run.read(f'{EVAL}/{RESULTS}')
-    run.closed_loop = run.read(f'{CLOSED_LOOP}/{RESULTS}')
-    run.diagnosis = run.read(f'{EVAL}/{DIAGNOSIS}')
-    return run
 
 
 # --- sections -----------------------------------------------------------------------------------
@@ -148,7 +79,7 @@ def section_checks(run: Run) -> list[str]:
     return lines + table(['Check', 'Expected', 'Measured', 'Result'], rows)
 
 
-def section_training(run: Run) -> list[str]:
+def section_training(run: Run, figures: Figures) -> list[str]:
     """Build section 2: training information, hyperparameters and the training curves."""
     lines: list[str] = []
     summary, config = run.summary or {}, run.config or {}
@@ -173,11 +104,10 @@ def section_training(run: Run) -> list[str]:
                  else settings[key]] for key in HYPERPARAMETERS if key in settings]
         lines += [f'**Learner:** {learner_of(settings).describe()}, `CnnPolicy`.', '',
                   '**Hyperparameters**', ''] + table(['Setting', 'Value'], rows)
-    if not (run.path / MONITOR).is_file():
+    if figures.training_curves is None:
         return lines + missing('`monitor.csv` (episode returns and lengths)', 'nav-gym-train')
     data = plots.monitor_arrays(run.path / MONITOR)
-    out, ref = run.figure('training_curves.png')
-    plots.training_curves(run.path, out)
+    ref = figures.training_curves
     ckpts = ', '.join(f'{s:,}' for s in plots.checkpoint_steps(run.path)) or 'none'
     lines += image(ref, 'Training curves: episode return, length and success/collision rate vs '
                    'environment interactions; dashed lines mark checkpoints')
@@ -212,18 +142,6 @@ def summary_row(entry: dict[str, Any]) -> list[Any]:
             s.get('episodes'), pct(s.get('success_rate')), pct(s.get('collision_rate')),
             pct(s.get('timeout_rate')), num(s.get('mean_length'), 1),
             num(s.get('mean_spl'), 3), num(s.get('mean_return'), 3)]
-
-
-def final_set(run: Run, split: str, seeds: list[int] | None = None) -> dict[str, Any] | None:
-    """Return the final DQN set on a split, or None.
-
-    Sets with the same ``seeds`` come first, then the one named ``dqn_<split>``.
-    """
-    found = [s for s in run.sets() if s.get('policy') == 'dqn' and s.get('split') == split
-             and not str(s.get('name', '')).startswith('early_')]
-    found.sort(key=lambda s: (sorted(s.get('seeds', [])) != sorted(seeds or []),
-                              s.get('name') != f'dqn_{split}'))
-    return found[0] if found else None
 
 
 def section_early(run: Run) -> list[str]:
@@ -267,9 +185,9 @@ def section_evaluation(run: Run) -> list[str]:
     lines += table(EVAL_COLUMNS, [summary_row(s) for s in run.sets()])
     needed = [('random policy on training seeds', [s for s in run.sets()
                                                    if s.get('policy') == 'random'
-                                                   and s.get('split') == 'train']),
-              ('final DQN on training seeds', final_set(run, 'train')),
-              ('final DQN on held-out seeds', final_set(run, 'heldout'))]
+                                                   and s.get('split') == TRAIN]),
+              ('final DQN on training seeds', final_set(run, TRAIN)),
+              ('final DQN on held-out seeds', final_set(run, HELDOUT))]
     for what, present in needed:
         if not present:
             lines += [f'> **Missing:** {what}. Produce it with `nav-eval-evaluate {run.shown}`.',
@@ -285,184 +203,47 @@ def section_evaluation(run: Run) -> list[str]:
     return lines
 
 
-def load_traces(run: Run, set_name: str) -> list[tuple[Path, dict[str, Any]]]:
-    """Return the traces of one evaluated set, by seed; an unreadable one is a noted problem."""
-    def unreadable(path: Path, exc: Exception) -> None:
-        run.problems.append(f'`{path.relative_to(run.path)}` could not be read '
-                            f'({type(exc).__name__}: {exc})')
-
-    found = [(path, trace) for path, trace in read_traces(run.path / EVAL, set_name,
-                                                          on_error=unreadable)
-             if isinstance(trace, dict) and 'scenario' in trace]
-    return sorted(found, key=lambda item: item[1].get('seed', 0))
-
-
-def dqn_sets_for_examples(run: Run) -> list[dict[str, Any]]:
-    """Return the final DQN sets to take examples from: held-out first, then train."""
-    return [s for s in (final_set(run, 'heldout'), final_set(run, 'train')) if s]
-
-
-def pick_examples(run: Run) -> tuple[Any, Any]:
-    """Pick a successful and a failed (path, trace) pair of the final DQN, each or None.
-
-    The failure is the diagnosed episode when its trace exists (the early checkpoint's when the
-    final model never failed), else the first failure.
-    """
-    traces = [t for s in dqn_sets_for_examples(run) for t in load_traces(run, s['name'])]
-    success = next((t for t in traces if t[1].get('outcome') == 'success'), None)
-    diagnosis = run.diagnosis or {}
-    failures = [t for t in traces if t[1].get('outcome') != 'success']
-    failed = next((t for t in failures if t[1].get('set') == diagnosis.get('set')
-                   and t[1].get('seed') == diagnosis.get('seed')), None)
-    if failed is None and not failures and diagnosis.get('set'):
-        # the final model failed nowhere: the diagnosed failure is the early checkpoint's
-        failed = next((t for t in load_traces(run, diagnosis['set'])
-                       if t[1].get('seed') == diagnosis.get('seed')), None)
-    return success, failed or (failures[0] if failures else None)
-
-
-def section_trajectories(run: Run) -> list[str]:
+def section_trajectories(run: Run, figures: Figures) -> list[str]:
     """Build section 5: the trajectory grid, example paths and a contact sheet of frames."""
-    arena = (run.results or {}).get('arena')
-    sets = dqn_sets_for_examples(run)
-    grid = [t for _, t in load_traces(run, sets[0]['name'])] if sets else []
-    if not arena or not grid:
+    if figures.grid is None:
         return missing('traces of the final DQN under `eval/traces/`',
                        f'nav-eval-evaluate {run.shown}')
-    name = sets[0].get('label') or sets[0]['name']
-    out, ref = run.figure('trajectory_grid.png')
-    plots.trajectory_grid(grid, arena, out, title=f'{name}: first {min(len(grid), 10)} episodes')
+    ref, name = figures.grid
     lines = image(ref, f'{name}: top-down paths (orange-red: obstacles, green: goal with the '
                   'dashed success radius, blue arrow: start pose, ring: final pose)')
-    success, failed = pick_examples(run)
-    for kind, example in (('success', success), ('failure', failed)):
+    for kind, example in figures.examples.items():
         if example is None:
             lines += [f'No {kind} among the traced final-DQN episodes.', '']
             continue
-        trace = example[1]
-        out, ref = run.figure(f'trajectory_{kind}.png')
-        plots.trajectory(trace, arena, out)
+        trace = example.trace
         caption = (f"{kind.capitalize()}: {trace.get('set')} seed {trace.get('seed')} "
                    f"({trace.get('outcome')}, {len(trace.get('steps', []))} steps)")
         if str(trace.get('set', '')).startswith('early'):
             caption += ("; the final model failed in none of its episodes, so this is the early "
                         "checkpoint's failure")
-        lines += image(ref, caption)
-    # the diagnosis already shows the failure's frames: then show the success's
-    order = (success, failed) if (run.diagnosis or {}).get('figures') else (failed, success)
-    for path, trace in (e for e in order if e):
-        frames_file = frames_path(path)
-        if not frames_file.is_file():
-            continue
-        with np.load(frames_file) as archive:
-            frames = archive['obs']
-        out, ref = run.figure('contact_sheet.png')
-        caption = (f"Policy observations (3x84x84) of {trace.get('set')} seed "
-                   f"{trace.get('seed')} ({trace.get('outcome')}); each frame is labelled with "
-                   'the step and action that produced it')
-        plots.contact_sheet(frames, out, labels=plots.frame_labels(trace.get('steps', [])),
-                            title=caption)
-        return lines + image(ref, caption)
+        lines += image(example.ref, caption)
+    if figures.contact_sheet is not None:
+        return lines + image(*figures.contact_sheet)
     return lines + missing('camera frames (`seed_<seed>_frames.npz`) of the shown episodes',
                            f'nav-eval-evaluate {run.shown}')
 
 
-# --- rollout videos -----------------------------------------------------------------------------
-
-def diagnosed_episode(run: Run) -> tuple[str, int, str] | None:
-    """Name the diagnosed episode: (set, seed, how the report calls it).
-
-    From ``eval/diagnosis.json``; before there is one, the episode ``nav-eval-diagnose`` picks
-    by default; None when there is no failure to diagnose.
-    """
-    diagnosis = run.diagnosis or {}
-    if diagnosis.get('set') is not None and diagnosis.get('seed') is not None:
-        return str(diagnosis['set']), int(diagnosis['seed']), 'diagnosed'
-    try:
-        return (*pick_episode(run.path / EVAL, None, None), 'to diagnose')
-    except (DiagnosisError, KeyError, TypeError, ValueError):
-        return None
-
-
-def video_episodes(run: Run) -> list[tuple[str, Path, dict[str, Any]]]:
-    """List the episodes to show as videos: (caption, trace path, trace).
-
-    The report's success and failure examples (``pick_examples``) and the diagnosed episode,
-    each once.
-    """
-    success, failed = pick_examples(run)
-    chosen = [(role, *example) for role, example in (('Success', success), ('Failure', failed))
-              if example is not None]
-    diagnosed = diagnosed_episode(run)
-    if diagnosed is not None:
-        set_name, seed, how = diagnosed
-        same = [i for i, (_, _, t) in enumerate(chosen) if (t.get('set'), t.get('seed'))
-                == (set_name, seed)]
-        if same:
-            role, path, trace = chosen[same[0]]
-            chosen[same[0]] = (f'{role} ({how})', path, trace)
-        else:
-            chosen += [(how.capitalize(), path, trace)
-                       for path, trace in load_traces(run, set_name) if trace.get('seed') == seed]
-    return [(f"{role}: {t.get('set')} seed {t.get('seed')} ({t.get('outcome')}, "
-             f"{len(t.get('steps', []))} steps)", path, t) for role, path, t in chosen]
-
-
-def write_videos(run: Run, folder: Path) -> list[tuple[str, Path | None, str]]:
-    """Write the video of every episode ``video_episodes`` lists into ``folder``.
-
-    Returns (caption, video path or None, why not) per episode; older videos in ``folder``
-    are removed.
-    """
-    arena = (run.results or {}).get('arena')
-    episodes = video_episodes(run) if arena else []
-    for stale in Path(folder).glob('*.mp4'):
-        stale.unlink()
-    written: list[tuple[str, Path | None, str]] = []
-    for caption, path, trace in episodes:
-        try:
-            out = videos.write_trace_video(path, trace, arena, folder)
-        except (OSError, RuntimeError, ValueError, KeyError) as exc:
-            written.append((caption, None, f'{type(exc).__name__}: {exc}'))
-            continue
-        written.append((caption, out, '' if out else f'no frames beside `{path.name}`'))
-    return written
-
-
-def section_videos(run: Run) -> list[str]:
+def section_videos(clips: Clips) -> list[str]:
     """Link the rollout videos (``report/videos/``); Result.html embeds them as players."""
-    try:
-        written = write_videos(run, run.figures.parent / VIDEOS)
-    except (OSError, ValueError, RuntimeError, ImportError) as exc:  # no encoder, bad traces
-        # the rest of the section (the trajectories) stands without them
-        return [f'> **Could not make the rollout videos:** {type(exc).__name__}: {exc}', '']
-    if not written:
+    if isinstance(clips, str):  # no encoder, bad traces: the trajectories stand without them
+        return [f'> **Could not make the rollout videos:** {clips}', '']
+    if not clips:
         return []
     lines = [f'**Rollout videos**: the policy observation (left) beside the top-down path so '
              f'far (right), one frame per decision at {videos.FPS} frames/s, labelled with the '
              'step, action, reward, return, distance and outcome.', '']
-    for caption, out, problem in written:
+    for caption, out, problem in clips:
         lines += video_link(f'{VIDEOS}/{out.name}', caption) if out else [
             f'{caption}: no video ({problem}).', '']
     return lines
 
 
-def include_markdown(run: Run, source: Path, prefix: str) -> list[str]:
-    """Return a Markdown file's lines verbatim; its relative images are copied to the report."""
-    def relink(match: re.Match[str]) -> str:
-        target = match.group(2)
-        for base in (source.parent, run.path):
-            found = base / target
-            if not re.match(r'[a-z]+:', target) and found.is_file():
-                name = found.name if found.name.startswith(prefix) else f'{prefix}_{found.name}'
-                out, ref = run.figure(name)
-                shutil.copyfile(found, out)
-                return f'![{match.group(1)}]({ref})'
-        return match.group(0)
-    return [IMAGE_RE.sub(relink, source.read_text()).rstrip(), '']
-
-
-def section_diagnosis(run: Run) -> list[str]:
+def section_diagnosis(run: Run, figures: Figures) -> list[str]:
     """Build section 6: the failure diagnosis with the evidence figures it names."""
     source = run.path / EVAL / DIAGNOSIS_TEXT
     diagnosis = run.diagnosis or {}
@@ -470,33 +251,26 @@ def section_diagnosis(run: Run) -> list[str]:
         return missing('a failure diagnosis (`eval/diagnosis.md`)',
                        f'nav-eval-diagnose {run.shown}')
     if source.is_file():
-        lines = include_markdown(run, source, 'diagnosis')
+        lines = list(figures.included[source])
     else:
         lines = [f"{diagnosis.get('summary', '')}", ''] + table(
             ['Layer', 'Status', 'Evidence'],
             [[layer.get('layer'), layer.get('status'), '; '.join(layer.get('evidence', []))]
              for layer in diagnosis.get('layers', [])])
-    shown = '\n'.join(lines)
-    for figure in diagnosis.get('figures', []):
-        found = run.path / figure
-        name = found.name if found.name.startswith('diagnosis') else f'diagnosis_{found.name}'
-        if not found.is_file():
-            lines += [f'> **Missing:** figure `{figure}` named by `eval/diagnosis.json`.', '']
-        elif f'{FIGURES}/{name})' not in shown:
-            out, ref = run.figure(name)
-            shutil.copyfile(found, out)
-            lines += image(ref, f'Diagnosis evidence: {figure}')
+    for figure, ref in figures.diagnosis_figures:
+        lines += (image(ref, f'Diagnosis evidence: {figure}') if ref else
+                  [f'> **Missing:** figure `{figure}` named by `eval/diagnosis.json`.', ''])
     return lines
 
 
-def section_experiments(run: Run, experiments: Path | None) -> list[str]:
+def section_experiments(run: Run, experiments: Path | None, figures: Figures) -> list[str]:
     """Build section 7: the experiments log included verbatim."""
     if experiments is None:
         return missing('the experiments log (attempts and targeted improvements)',
                        f'nav-eval-report {run.shown} --experiments docs/experiments.md')
     if not Path(experiments).is_file():
         return [f'> **Missing:** the experiments log `{experiments}` does not exist.', '']
-    return include_markdown(run, Path(experiments), 'experiments')
+    return list(figures.included[Path(experiments)])
 
 
 def default_commands(run: Run, experiments: Path | None = None) -> list[str]:
@@ -524,7 +298,7 @@ def evidence(run: Run, experiments: Path | None) -> list[str]:
              ('Early and final checkpoint comparison', 3,
               any(str(s.get('name')).startswith('early_') for s in run.sets())),
              ('Evaluation table: random, DQN train, DQN held-out', 4,
-              bool(final_set(run, 'train') and final_set(run, 'heldout'))),
+              bool(final_set(run, TRAIN) and final_set(run, HELDOUT))),
              ('Representative trajectories', 5, bool(dqn_sets_for_examples(run))),
              ('One failed DQN episode with a diagnosis', 6, diagnosed),
              ('One targeted improvement and justification', 7,
@@ -534,22 +308,29 @@ def evidence(run: Run, experiments: Path | None) -> list[str]:
                   for what, n, ok in items])
 
 
-def build_markdown(run: Run, experiments: Path | None, commands: list[str] | None) -> str:
+def build_markdown(run: Run, experiments: Path | None, commands: list[str] | None,
+                   figures: Figures | None = None, clips: Clips = ()) -> str:
     """Return the report's Markdown: header, evidence checklist and every section.
 
-    A section whose input is malformed says so instead of failing the report.
+    ``figures`` and ``clips`` are what was drawn and encoded before (none: the sections say
+    their figures are missing).  A section whose input is malformed says so instead of
+    failing the report.
     """
-    bodies = (section_checks, section_training, section_early,
+    figures = figures or Figures()
+    bodies = (section_checks, lambda r: section_training(r, figures), section_early,
               lambda r: section_evaluation(r) + section_closed_loop(r.closed_loop, r.shown),
-              lambda r: section_trajectories(r) + section_videos(r), section_diagnosis,
-              lambda r: section_experiments(r, experiments),
+              lambda r: section_trajectories(r, figures) + section_videos(clips),
+              lambda r: section_diagnosis(r, figures),
+              lambda r: section_experiments(r, experiments, figures),
               lambda r: ['```bash', *(commands or default_commands(r, experiments)), '```', ''])
     sections: list[str] = []
-    for title, body in zip(SECTIONS, bodies, strict=True):
+    for number, (title, body) in enumerate(zip(SECTIONS, bodies, strict=True), start=1):
         try:
+            if number in figures.errors:
+                raise _FigureError(figures.errors[number])
             lines = body(run)
-        except (OSError, ValueError, KeyError, IndexError, TypeError) as exc:  # malformed input
-            lines = [f'> **Could not build this section:** {type(exc).__name__}: {exc}', '']
+        except MALFORMED as exc:  # malformed input
+            lines = [f'> **Could not build this section:** {_problem(exc)}', '']
         sections += [f'## {title}', '', *lines]
     header = [f'# Result: {Path(run.shown).name}', '',
               f'Run directory `{run.shown}`; report written {datetime.now():%Y-%m-%d %H:%M} by '
@@ -559,15 +340,32 @@ def build_markdown(run: Run, experiments: Path | None, commands: list[str] | Non
     return '\n'.join(header + sections).rstrip() + '\n'
 
 
+def _problem(exc: Exception) -> str:
+    """Say what went wrong: a figure's error as it was kept, else the exception's type and text."""
+    return str(exc) if isinstance(exc, _FigureError) else f'{type(exc).__name__}: {exc}'
+
+
+class _FigureError(ValueError):
+    """A section's figures failed to draw (the message is the error as it was kept)."""
+
+
 def write_report(run_dir: Path, experiments: Path | None = None,
                  commands: list[str] | None = None) -> Path:
-    """Write RUN/report/Result.md, Result.html and figures/; returns the Markdown path."""
+    """Write RUN/report/Result.md, Result.html, figures/ and videos/; returns the Markdown path.
+
+    The figures and the videos are made first; the text is built from what they made.
+    """
     run = load_run(run_dir)
     if run.figures.is_dir():
         for stale in run.figures.glob('*.png'):
             stale.unlink()
     run.figures.mkdir(parents=True, exist_ok=True)
-    text = build_markdown(run, experiments, commands)
+    figures = draw_figures(run, experiments)
+    try:
+        clips: Clips = write_run_videos(run, run.figures.parent / VIDEOS)
+    except (OSError, ValueError, RuntimeError, ImportError) as exc:  # no encoder, bad traces
+        clips = f'{type(exc).__name__}: {exc}'
+    text = build_markdown(run, experiments, commands, figures, clips)
     report = run.figures.parent / REPORT_TEXT
     report.write_text(text)
     report.with_suffix('.html').write_text(to_html(text, report.parent, run.shown))

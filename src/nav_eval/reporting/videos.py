@@ -17,14 +17,15 @@ of ffmpeg CPU time.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from nav_eval.reporting import plots
-from nav_gym.run_dir import frames_path
+from nav_eval.reporting.run_inputs import Run, video_episodes
+from nav_gym.training.run_dir import frames_path
 
 FPS = 4  # one control period is 0.512 s: 4 frames/s is about twice real time
 SIDE = 336  # pixels of each panel: the observation's and the top-down view's
@@ -199,3 +200,28 @@ def write_trace_video(trace_path: Path, trace: dict[str, Any], arena: dict[str, 
     with np.load(frames_file) as archive:
         frames = archive['obs']
     return write_video(trace, frames, arena, Path(folder) / video_name(trace))
+
+
+#: the videos of a report: (caption, video path or None, why not) per episode, or what failed
+Clips = Sequence[tuple[str, Path | None, str]] | str
+
+
+def write_run_videos(run: Run, folder: Path) -> list[tuple[str, Path | None, str]]:
+    """Write the video of every episode a run's report shows into ``folder``.
+
+    The episodes are :func:`nav_eval.reporting.run_inputs.video_episodes`'.  Returns
+    (caption, video path or None, why not) per episode; older videos in ``folder`` are removed.
+    """
+    arena = (run.results or {}).get('arena')
+    episodes = video_episodes(run) if arena else []
+    for stale in Path(folder).glob('*.mp4'):
+        stale.unlink()
+    written: list[tuple[str, Path | None, str]] = []
+    for caption, path, trace in episodes:
+        try:
+            out = write_trace_video(path, trace, arena, folder)
+        except (OSError, RuntimeError, ValueError, KeyError) as exc:
+            written.append((caption, None, f'{type(exc).__name__}: {exc}'))
+            continue
+        written.append((caption, out, '' if out else f'no frames beside `{path.name}`'))
+    return written

@@ -23,10 +23,10 @@ from typing import Any
 from nav_eval.errors import EvaluationError, SweepError
 from nav_eval.seeds import CURVE, HELDOUT_BANK, TRAIN_BANK, parse_seeds
 from nav_gym.errors import NavGymError
-from nav_gym.train_config import FIELDS, build
+from nav_gym.training.config import FIELDS, build
+from nav_sim.core.world import load_arena
 from nav_sim.errors import NavSimError
-from nav_sim.sim_process import typed_params
-from nav_sim.world import load_arena
+from nav_sim.ros.process import typed_params
 
 SWEEP_FILE = 'sweep.json'
 FAILED_FILE = 'failed.json'  # trials that failed twice, with their error and log tail

@@ -27,9 +27,11 @@ from pathlib import Path
 from typing import Any
 
 from nav_eval.errors import TrialFailedError
-from nav_eval.evaluation.sets import BASELINE_POLICIES, SPLITS
+from nav_eval.evaluation.sets import BASELINE_POLICIES
 from nav_eval.seeds import seed_text
-from nav_gym.run_dir import (
+from nav_eval.sweeps.domain import reserve_any_domain
+from nav_gym.cli import run_command
+from nav_gym.training.run_dir import (
     CONFIG,
     EVAL,
     FINAL_MODEL,
@@ -38,8 +40,8 @@ from nav_gym.run_dir import (
     checkpoints,
     curve_dir,
 )
-from nav_sim.domain import reserve_any_domain
-from nav_sim.sim_process import child_preexec
+from nav_sim.core.config import SPLITS
+from nav_sim.ros.process import child_preexec
 
 LOG_TAIL_LINES = 15
 THREAD_VARIABLES = ('OMP_NUM_THREADS', 'MKL_NUM_THREADS', 'OPENBLAS_NUM_THREADS')
@@ -154,16 +156,18 @@ def trial_command(trial: dict[str, Any]) -> list[str] | None:
 def train_and_evaluate(trial: dict[str, Any]) -> int:
     """Run a trial's remaining stages in this process; return the exit code (130: stopped).
 
-    Training is ``nav-gym-train``'s own entry point (its arguments, its Ctrl-C and SIGTERM
-    handling: a stopped run saves a checkpoint); evaluation follows only a finished training.
+    Training is ``nav-gym-train``'s own (its parser, its body and its one-line errors; the
+    caller handles SIGTERM as Ctrl-C, so a stopped run saves a checkpoint); evaluation follows
+    only a finished training.
     """
     args = train_args(trial)
     if args is not None:
-        from nav_gym.train import main as train_main
+        from nav_gym.training.trainer import command_parser, run_training
         print(f"$ nav-gym-train {' '.join(args)}", flush=True)
         start, code = time.monotonic(), 0
         try:
-            train_main(args)
+            parsed = command_parser('nav-gym-train').parse_args(args)
+            run_command('nav-gym-train', lambda: run_training(parsed))
         except SystemExit as exc:
             code = exc.code if isinstance(exc.code, int) else int(exc.code is not None)
         print(f'# training exited with code {code} after {time.monotonic() - start:.1f} s',

@@ -1,0 +1,164 @@
+"""A sweep's trials, read from their files and grouped into configurations (no ROS, no Ray)."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from nav_eval.analysis import anatomy, calibration
+from nav_eval.seeds import HELDOUT_BANK, TRAIN_BANK, seed_text
+from nav_eval.sweeps.spec import (
+    TRIALS,
+    SweepSpec,
+)
+from nav_gym.errors import NavGymError
+from nav_gym.training.config import TrainConfig
+from nav_gym.training.run_dir import (
+    CONFIG,
+    CURVE,
+    EVAL,
+    FINAL_MODEL,
+    RESULTS,
+    RESUME_COMMAND,
+    SUMMARY,
+    load_config,
+    read_traces,
+)
+from nav_sim.core.config import HELDOUT, TRAIN, SimConfig
+from nav_sim.errors import NavSimError
+
+FINAL_SETS = {TRAIN: 'dqn_train', HELDOUT: 'dqn_heldout'}
+
+
+BOOKKEEPING = ('seed', 'run_name', 'runs_dir', 'device', 'namespace', 'sim', 'sim_timeout',
+               'save_replay_buffer', 'keep_replay_buffer')
+
+
+def read_json(path: Path) -> Any:
+    """Return a JSON file's contents, or None when it is missing or unreadable."""
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+
+
+def trial_dirs(folder: Path) -> list[Path]:
+    """Return the run directories of a sweep (``trials/*``) or of a folder of runs."""
+    root = folder / TRIALS if (folder / TRIALS).is_dir() else folder
+    return sorted(p for p in root.iterdir() if (p / CONFIG).is_file()) \
+        if root.is_dir() else []
+
+
+def read_trial(run_dir: Path) -> dict[str, Any]:
+    """Collect one trial's seed, settings, final evaluation and curve points."""
+    config = load_config(run_dir)
+    results = read_json(run_dir / EVAL / RESULTS) or {}
+    sets = {s['name']: s for s in results.get('sets', [])}
+    final = {split: sets[name] for split, name in FINAL_SETS.items() if name in sets}
+    curve, curve_values = {}, {}
+    for path in sorted((run_dir / EVAL / CURVE).glob(f'*/{RESULTS}')):
+        data = read_json(path) or {}
+        for s in data.get('sets', []):
+            curve[int(path.parent.name)] = {'success_rate': s['summary']['success_rate'],
+                                            'seeds': s['seeds']}
+            curve_values[int(path.parent.name)] = calibration.set_values(
+                path.parent, s['name'], config, s['seeds'])
+    summary = read_json(run_dir / SUMMARY) or {}
+    heldout = final.get(HELDOUT)
+    traces = (list(read_traces(run_dir / EVAL, FINAL_SETS[HELDOUT], heldout['seeds']))
+              if heldout else [])
+    key = {k: v for k, v in vars(_spelled_out(config)).items() if k not in BOOKKEEPING}
+    return {'name': run_dir.name, 'run_dir': run_dir, 'seed': config.seed, 'settings': key,
+            'final': final, 'curve': curve,
+            'anatomy': anatomy.traces_anatomy(traces, results.get('arena'), half_fov(config)),
+            'values': calibration.traces_values(traces, config),
+            'curve_values': curve_values,
+            'finished': (run_dir / FINAL_MODEL).is_file(),
+            'wall_clock_s': summary.get('wall_clock_total_s'),
+            'steps': summary.get('num_timesteps')}
+
+
+def half_fov(config: TrainConfig) -> float:
+    """Return the camera's horizontal half field of view (rad) of a run's sim settings."""
+    return math.radians(SimConfig.from_params(config.sim_params).camera_hfov_deg) / 2.0
+
+
+def _spelled_out(config: TrainConfig) -> TrainConfig:
+    """Return a run's config with every sim parameter named, as runs save it since the worlds.
+
+    An older run names only the sim parameters set then; those added since ran at their
+    default (the world's), so trials of either age group together and name no ``None``.
+    Where the run's world cannot be read here, the config stays as saved.
+    """
+    try:
+        return config.with_full_sim_params()
+    except (NavGymError, NavSimError):
+        return config
+
+
+def group_trials(trials: list[dict[str, Any]], names: dict[str, str]) -> dict[str, list[dict]]:
+    """Group trials by their settings.
+
+    A group is named from ``names`` (trial -> config) or by the settings that differ between
+    groups (or from the defaults).
+    """
+    groups: list[tuple[dict, list[dict]]] = []
+    for trial in trials:
+        for settings, members in groups:
+            if settings == trial['settings']:
+                members.append(trial)
+                break
+        else:
+            groups.append((trial['settings'], [trial]))
+    defaults = {k: v for k, v in vars(TrainConfig().with_full_sim_params()).items()
+                if k not in BOOKKEEPING}
+    out: dict[str, list[dict]] = {}
+    for settings, members in groups:
+        label = next((names[m['name']] for m in members if m['name'] in names), None)
+        if label is None:
+            others = [s for s, _ in groups if s is not settings] or [defaults]
+            label = _difference_label(settings, others)
+        out[label] = sorted(members, key=lambda m: m['seed'])
+    return out
+
+
+def _flat(settings: dict[str, Any]) -> dict[str, Any]:
+    flat = {k: v for k, v in settings.items() if k != 'sim_params'}
+    flat.update(settings.get('sim_params') or {})
+    return flat
+
+
+def _difference_label(settings: dict, others: list[dict]) -> str:
+    mine = _flat(settings)
+    keys = sorted({k for o in others for k, v in _flat(o).items() if mine.get(k) != v})
+    return ', '.join(f'{k}={mine.get(k)}' for k in keys) or 'defaults'
+
+
+def missing_line(trial: dict[str, Any], folder: Path, spec: dict[str, Any]) -> str:
+    """Say what a trial without its final evaluation lacks and the command that completes it.
+
+    In a sweep (``spec`` from sweep.json) its resume does both; a folder of runs has the banks.
+    """
+    if spec:
+        # a sweep's resume finishes its trainings and then their evaluations
+        what = 'training unfinished' if not trial['finished'] else 'no final evaluation'
+        return f"{trial['name']}: {what}; run `visnav-sweep --resume {folder}`"
+    if not trial['finished']:
+        return (f"{trial['name']}: training unfinished; run `{RESUME_COMMAND} {trial['run_dir']}`,"
+                ' then evaluate it')
+    return (f"{trial['name']}: no final evaluation; run `nav-eval-evaluate {trial['run_dir']} "
+            f'--sets dqn_train,dqn_heldout --train-seeds {seed_text(TRAIN_BANK)} '
+            f'--heldout-seeds {seed_text(HELDOUT_BANK)} --no-record`')
+
+
+def trial_configs(folder: Path, spec: dict[str, Any]) -> dict[str, str]:
+    """Map trial names to configuration names from ``sweep.json`` (empty without one)."""
+    if not spec:
+        return {}
+    try:
+        trials = SweepSpec(**{**spec, 'sweep_dir': str(folder)}).trials()
+    except TypeError:
+        return {}
+    return {t['name']: t['config'] for t in trials if t['kind'] == 'train'}

@@ -1,0 +1,46 @@
+"""The policy node's settings (PolicyConfig) and their parameter types (no ROS)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass
+
+from nav_sim.core.config import setting
+from nav_sim.errors import ConfigError
+
+POLICIES = ('dqn', 'servo')
+
+
+@dataclass(frozen=True)
+class PolicyConfig:
+    """Parameters of the policy node (``config/policy.yaml`` lists them with their defaults)."""
+
+    model: str = setting('', "the trained model: a run directory (its final_model.zip) or a "
+                         "checkpoint .zip; its run's config.yaml gives the actions ('' only "
+                         'with policy servo)')
+    policy: str = setting('dqn', "'dqn': the model's greedy action; 'servo': the image-only "
+                          'servo baseline (turns toward green pixels; needs no model)')
+    period: float = setting(0.0, 'decision period in wall-clock seconds (0: the control period '
+                            "of the model's run, 0.512 s by default; at a sim's realtime_rate R "
+                            'use ctrl_dt / R)')
+    image_timeout: float = setting(0.0, 'publish zero velocity while no image newer than this '
+                                   '(wall-clock seconds) has arrived (0: two periods)')
+    device: str = setting('cpu', "torch device of the model: 'cpu' or 'cuda'")
+
+    def __post_init__(self) -> None:
+        """Refuse values the node cannot run with (ConfigError)."""
+        if self.policy not in POLICIES:
+            raise ConfigError(f'policy must be one of {list(POLICIES)}, got {self.policy!r}')
+        if self.policy == 'dqn' and not self.model:
+            raise ConfigError('policy dqn needs a model: -p model:=RUN_DIR (or a .zip); or use '
+                              '-p policy:=servo')
+        for name in ('period', 'image_timeout'):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ConfigError(f'{name} must be a finite number of seconds >= 0 (0: the '
+                                  f'default), got {value!r}')
+
+
+#: every policy node parameter and its declared type
+PARAMETER_TYPES = {f.name: type(f.default) for f in dataclasses.fields(PolicyConfig)}

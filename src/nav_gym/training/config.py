@@ -1,0 +1,291 @@
+"""Training configuration: the learner, the workshop's DQN settings and the run's whole EnvConfig.
+
+Overridable from YAML and the command line; the effective configuration is saved with each run.
+Light imports only (no torch): :class:`LearnerSpec` names the learner,
+:mod:`nav_gym.training.learner` builds it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from nav_gym.env.config import EnvConfig, parse_mapping
+from nav_gym.errors import TrainConfigError
+from nav_sim.core.config import SimConfig, convert, setting
+from nav_sim.core.world_file import world_settings
+from nav_sim.errors import ConfigError
+from nav_sim.ros.process import typed_params
+
+_ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
+#: the components' flags (LearnerSpec fields), each with its value that turns the component off
+COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0,
+              'prioritized_replay': False}
+
+
+def _env(name: str) -> Any:
+    """Declare a field with the default and description of the EnvConfig field ``name``."""
+    return setting(_ENV_FIELDS[name].default, _ENV_FIELDS[name].metadata['help'])
+
+
+@dataclass(frozen=True)
+class LearnerSpec:
+    """Which learner a run trains: the TD target and the components (TrainConfig's fields).
+
+    Each component has a published basis and is off at its value in :data:`COMPONENTS`.  The
+    default learner is SB3's DQN with Double DQN targets and 3-step returns (adopted in
+    docs/experiments.md); every component off is SB3's DQN with Double DQN targets, and
+    ``double_q: false`` with every component off is SB3's DQN untouched, the workshop's learner
+    (config/workshop.yaml).  :mod:`nav_gym.training.learner` builds it.
+    """
+
+    double_q: bool = setting(True, 'Double DQN targets (van Hasselt et al. 2016): the online '
+                             "network picks the next action, the target network values it; false: "
+                             "SB3's DQN target (with n_steps 1 and every other component off, "
+                             "the workshop's learner, SB3's DQN exactly: config/workshop.yaml)")
+    n_steps: int = setting(3, "n-step returns (SB3's NStepReplayBuffer; Sutton 1988, Rainbow); "
+                           '1: one-step targets')
+    dueling: bool = setting(False, 'a dueling head, Q = V + A - mean(A) (Wang et al. 2016)')
+    augment_shift: int = setting(0, 'shift every sampled observation at random by up to this '
+                                 'many pixels, edges replicated (DrQ, Kostrikov et al. 2021; '
+                                 'RAD); 0: off')
+    prioritized_replay: bool = setting(False, 'proportional prioritized replay with importance '
+                                       'weights (Schaul et al. 2016)')
+    priority_alpha: float = setting(0.6, 'prioritized replay: priority = (|TD error| + '
+                                    'eps)^alpha')
+    priority_beta: float = setting(0.4, 'prioritized replay: importance-weight exponent at the '
+                                   'start, annealed linearly to 1')
+
+    def __post_init__(self) -> None:
+        """Refuse values the learner cannot use (TrainConfigError naming the setting)."""
+        if int(self.n_steps) < 1:
+            raise TrainConfigError(f'n_steps must be >= 1, got {self.n_steps!r}')
+        if int(self.augment_shift) < 0:
+            raise TrainConfigError(f'augment_shift must be >= 0, got {self.augment_shift!r}')
+        for name in ('priority_alpha', 'priority_beta'):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise TrainConfigError(f'{name} must be within [0, 1], got '
+                                       f'{getattr(self, name)!r}')
+
+    @property
+    def vanilla(self) -> bool:
+        """Tell whether this is SB3's DQN untouched (no Double DQN target, no component)."""
+        return not self.double_q and all(
+            getattr(self, name) == off for name, off in COMPONENTS.items())
+
+    def describe(self) -> str:
+        """Name the learner as the report and Sweep.md write it."""
+        parts = ['DQN (SB3) with Double DQN targets (van Hasselt et al. 2016)'
+                 if self.double_q else 'DQN (SB3)']
+        if self.n_steps > 1:
+            parts.append(f'{self.n_steps}-step returns')
+        if self.dueling:
+            parts.append('a dueling head (Wang et al. 2016)')
+        if self.augment_shift:
+            parts.append(f'random shifts of up to {self.augment_shift} px (DrQ, Kostrikov et al. '
+                         '2021)')
+        if self.prioritized_replay:
+            parts.append(f'prioritized replay (Schaul et al. 2016, alpha {self.priority_alpha}, '
+                         f'beta {self.priority_beta} to 1)')
+        return ', '.join(parts)
+
+
+_LEARNER_FIELDS = {f.name: f for f in dataclasses.fields(LearnerSpec)}
+
+
+def learner_of(settings: dict[str, Any]) -> LearnerSpec:
+    """Return the learner a mapping of training settings names (its other keys ignored)."""
+    return LearnerSpec(**{k: v for k, v in settings.items() if k in _LEARNER_FIELDS})
+
+
+def _learner(name: str) -> Any:
+    """Declare a field with the default and description of the LearnerSpec field ``name``."""
+    return setting(_LEARNER_FIELDS[name].default, _LEARNER_FIELDS[name].metadata['help'])
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """The learner on Monitor(NavigationEnv): Double DQN, 3-step returns, the workshop settings."""
+
+    total_timesteps: int = setting(50_000, 'environment steps to train for')
+    learning_rate: float = setting(1e-4, 'optimiser step size')
+    buffer_size: int = setting(50_000, 'replay buffer capacity (transitions)')
+    learning_starts: int = setting(2_000, 'steps collected before gradient updates begin')
+    batch_size: int = setting(32, 'transitions per gradient step')
+    gamma: float = setting(0.99, 'discount factor')
+    train_freq: int = setting(4, 'environment steps between gradient updates (SB3 default)')
+    gradient_steps: int = setting(1, 'gradient steps per update (SB3 default)')
+    target_update_interval: int = setting(1_000, 'steps between target-network updates')
+    exploration_fraction: float = setting(0.25, 'fraction of training over which epsilon decays')
+    exploration_initial_eps: float = setting(1.0, 'initial epsilon (SB3 default)')
+    exploration_final_eps: float = setting(0.05, 'final epsilon')
+    seed: int = setting(9, 'seed of DQN, the env and its scenario sequence')
+    double_q: bool = _learner('double_q')
+    n_steps: int = _learner('n_steps')
+    dueling: bool = _learner('dueling')
+    augment_shift: int = _learner('augment_shift')
+    prioritized_replay: bool = _learner('prioritized_replay')
+    priority_alpha: float = _learner('priority_alpha')
+    priority_beta: float = _learner('priority_beta')
+    checkpoint_freq: int = setting(10_000, 'steps between checkpoints (all are kept)')
+    save_replay_buffer: bool = setting(True, 'save the replay buffer with checkpoints (for '
+                                       '--resume)')
+    keep_replay_buffer: bool = setting(False, 'keep checkpoints/replay_buffer.pkl when the run '
+                                       'finishes (it is only needed to resume; ~2 GB at 50k)')
+    device: str = setting('auto', "torch device: 'auto', 'cpu' or 'cuda'")
+    runs_dir: str = setting('runs', 'directory that holds one sub-directory per run')
+    run_name: str = setting('', "run directory name ('' = dqn_<date>_<time>)")
+    # the env's settings, as EnvConfig defines them (the run's whole EnvConfig: env_config())
+    split: str = _env('split')
+    max_episode_steps: int = _env('max_episode_steps')
+    namespace: str = _env('namespace')
+    sim: str = _env('sim')
+    sim_timeout: float = _env('sim_timeout')
+    probe_timeout: float = _env('probe_timeout')
+    forward_speed: float = _env('forward_speed')
+    turn_rate: float = _env('turn_rate')
+    turn_speed: float = _env('turn_speed')
+    progress_weight: float = _env('progress_weight')
+    step_penalty: float = _env('step_penalty')
+    goal_reward: float = _env('goal_reward')
+    collision_penalty: float = _env('collision_penalty')
+    sim_params: dict = _env('sim_params')
+
+    def __post_init__(self) -> None:
+        """Check the values (a clear TrainConfigError for a bad one)."""
+        for name in ('total_timesteps', 'buffer_size', 'batch_size', 'train_freq',
+                     'gradient_steps', 'target_update_interval', 'checkpoint_freq'):
+            if int(getattr(self, name)) < 1:
+                raise TrainConfigError(f'{name} must be >= 1, got {getattr(self, name)!r}')
+        if self.learning_starts < 0:
+            raise TrainConfigError('learning_starts must be >= 0')
+        if not 0 < self.exploration_fraction <= 1:
+            raise TrainConfigError('exploration_fraction must be in (0, 1]')
+        self.learner()  # the learner's own checks
+        # the env's checks, and its resolved values (sim_params {}, the world's episode limit)
+        env = EnvConfig(**{name: getattr(self, name) for name in _ENV_FIELDS})
+        object.__setattr__(self, 'sim_params', env.sim_params)
+        object.__setattr__(self, 'max_episode_steps', env.max_episode_steps)
+
+    def env_config(self, **overrides: Any) -> EnvConfig:
+        """Return the run's whole EnvConfig (actions, episode limit, reward weights, sim)."""
+        values = {name: getattr(self, name) for name in _ENV_FIELDS}
+        values['sim_params'] = dict(self.sim_params)
+        return EnvConfig(**{**values, **overrides})
+
+    def learner(self) -> LearnerSpec:
+        """Return which learner this config trains (the TD target and the components)."""
+        return learner_of(dataclasses.asdict(self))
+
+    def dqn_kwargs(self) -> dict[str, Any]:
+        """Return the hyperparameters of ``DQN(...)`` this config sets.
+
+        What the learner itself adds is :func:`nav_gym.training.learner.learner_kwargs`.
+        """
+        keys = ('learning_rate', 'buffer_size', 'learning_starts', 'batch_size', 'gamma',
+                'train_freq', 'gradient_steps', 'target_update_interval',
+                'exploration_fraction', 'exploration_initial_eps', 'exploration_final_eps',
+                'seed', 'device')
+        return {k: getattr(self, k) for k in keys}
+
+    def with_full_sim_params(self) -> TrainConfig:
+        """Return this config with every simulation parameter spelled out in ``sim_params``.
+
+        A run saves this, so what it was trained on does not change when a default changes
+        later (evaluation, diagnosis and resume all read the run's config).  Node parameters
+        in ``sim_params`` (e.g. ``publish_clock``) are kept, converted to their declared types.
+        """
+        try:
+            params = typed_params(self.sim_params)  # known names, declared types
+            sim = SimConfig.from_params(params)
+        except ConfigError as exc:
+            raise TrainConfigError(f'sim_params: {exc}') from exc
+        return dataclasses.replace(self, sim_params={**params, **dataclasses.asdict(sim)})
+
+    def in_world(self, sim_params: dict[str, Any]) -> TrainConfig:
+        """Return this config with sim parameters replaced: a policy played elsewhere.
+
+        For an evaluation in another world or look (``nav-eval-evaluate --sim-params``).  A
+        new ``world`` brings its own settings: every setting the run's world or the new world
+        sets (``visnav:`` customs) takes the new world's value, else its default, and the
+        episode limit is the new world's; a value in ``sim_params`` wins.
+        """
+        try:
+            given = typed_params(sim_params)
+        except ConfigError as exc:
+            raise TrainConfigError(f'sim_params: {exc}') from exc
+        sim, steps = dict(self.sim_params), self.max_episode_steps
+        old, new = (str(p.get('world', SimConfig.world)) for p in (sim, {**sim, **given}))
+        if new != old:
+            worlds = set(world_settings(old)) | set(world_settings(new))
+            sim = {k: v for k, v in sim.items() if k not in worlds}
+            steps = 0  # the new world's limit
+        return dataclasses.replace(self, sim_params={**sim, **given},
+                                   max_episode_steps=steps).with_full_sim_params()
+
+    def to_yaml(self) -> str:
+        """Return the config as YAML (what a run saves as config.yaml)."""
+        return yaml.safe_dump(dataclasses.asdict(self), sort_keys=False)
+
+
+FIELDS = {f.name: f for f in dataclasses.fields(TrainConfig)}
+
+
+def coerce(values: dict[str, Any], source: str) -> dict[str, Any]:
+    """Check names and convert types of overrides (YAML or command line).
+
+    Every value goes through :func:`nav_sim.core.config.convert`, the one conversion of a setting:
+    ``'4.0'`` for an int is 4, ``3.7`` is an error, a bool takes only true/false (a YAML file's
+    ``yes`` is already a bool when YAML reads it; on the command line it is an error).
+    """
+    unknown = sorted(set(values) - set(FIELDS))
+    if unknown:
+        raise TrainConfigError(f'{source}: unknown setting(s) {unknown}; known: {sorted(FIELDS)}')
+    out = {}
+    for key, value in values.items():
+        if key == 'sim_params':
+            out[key] = parse_mapping(value, f'{source}: {key}')
+            continue
+        try:
+            out[key] = convert(key, type(FIELDS[key].default), value)
+        except ConfigError as exc:
+            raise TrainConfigError(f'{source}: {exc}') from None
+    return out
+
+
+def load_yaml(path: str | Path) -> dict[str, Any]:
+    """Read a YAML file of settings (checked and converted), or raise TrainConfigError."""
+    try:
+        data = yaml.safe_load(Path(path).read_text(encoding='utf-8')) or {}
+    except UnicodeDecodeError:
+        raise TrainConfigError(f'cannot read training config {path}: not a UTF-8 text file; '
+                               'it must be YAML (see config/train.yaml)') from None
+    except (OSError, yaml.YAMLError) as exc:
+        raise TrainConfigError(f'cannot read training config {path}: '
+                               f'{" ".join(str(exc).split())}') from None
+    if not isinstance(data, dict):
+        raise TrainConfigError(f'{path}: expected a mapping of settings')
+    return coerce(data, str(path))
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    """One ``--flag`` per field; only flags given on the command line override."""
+    for name, f in FIELDS.items():
+        flag = '--' + name.replace('_', '-')
+        parser.add_argument(flag, dest=name, default=argparse.SUPPRESS, metavar='V',
+                            help=f"{f.metadata['help']} (default {f.default!r})")
+
+
+def build(config_file: str | None, overrides: dict[str, Any],
+          base: dict[str, Any] | None = None) -> TrainConfig:
+    """Return the config of defaults < ``base`` < the config file < command-line overrides."""
+    values = dict(base or {})
+    if config_file:
+        values.update(load_yaml(config_file))
+    values.update(coerce(overrides, 'command line'))
+    return TrainConfig(**values)

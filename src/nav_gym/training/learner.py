@@ -1,0 +1,337 @@
+"""The learner: SB3's DQN with Double DQN targets, and the components each flag adds.
+
+The default learner is "DQN (SB3) with Double DQN targets (van Hasselt et al. 2016), 3-step
+returns": SB3's ``DQN`` whose TD target lets the online network pick the next action and the
+target network value it, instead of taking the maximum of the target network's values (which
+overestimates where the actions' true values are close: docs/experiments.md measured it here),
+on SB3's n-step replay buffer.  Each component has a published basis and a flag in
+config/train.yaml (:data:`nav_gym.training.config.COMPONENTS` holds the value that turns it off);
+all of them off is the Double DQN learner, and ``double_q: false`` with all of them off is SB3's
+own ``DQN`` untouched (the workshop's learner, bit for bit: config/workshop.yaml).
+
+- ``n_steps``: n-step returns (Sutton 1988; Rainbow, Hessel et al. 2018), SB3's own
+  ``NStepReplayBuffer``;
+- ``dueling``: a dueling head, ``Q = V + A - mean(A)`` (Wang et al. 2016), on the CNN's features;
+- ``augment_shift``: every sampled observation and next observation shifted at random by up to
+  this many pixels with replicated edges (DrQ, Kostrikov et al. 2021; RAD, Laskin et al. 2020);
+- ``prioritized_replay``: proportional prioritized replay with importance weights (Schaul et
+  al. 2016).
+
+Everything else is SB3's: network, replay, exploration, target updates, the saved model format
+(a checkpoint of any of these loads with ``DQN.load``).  One change is not a component but how
+the optimiser runs: this learner's Adam is PyTorch's fused CPU/GPU kernel (``fused=True``), the
+same update as SB3's default per-parameter loop, which took 8.9 of a gradient step's ~45 ms on
+one CPU core here (benchmarks/bench_learner.py).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch as th
+from stable_baselines3 import DQN
+from stable_baselines3.common.buffers import NStepReplayBuffer
+from stable_baselines3.common.torch_layers import create_mlp
+from stable_baselines3.common.type_aliases import ReplayBufferSamples
+from stable_baselines3.dqn.policies import CnnPolicy, QNetwork
+from torch import nn
+from torch.nn import functional as F
+
+from nav_gym.training.config import LearnerSpec
+
+PRIORITY_EPS = 1e-6  # added to |TD error| so that no transition's priority is zero
+
+
+def double_q_target(rewards: th.Tensor, dones: th.Tensor, discounts: th.Tensor | float,
+                    next_q_online: th.Tensor, next_q_target: th.Tensor) -> th.Tensor:
+    """Return the Double DQN TD target, ``(batch, 1)``.
+
+    ``next_q_online`` picks the next action (argmax), ``next_q_target`` values it; a done
+    transition's target is its reward.
+    """
+    next_actions = next_q_online.argmax(dim=1, keepdim=True)
+    next_values = th.gather(next_q_target, dim=1, index=next_actions)
+    return rewards + (1 - dones) * discounts * next_values
+
+
+def max_q_target(rewards: th.Tensor, dones: th.Tensor, discounts: th.Tensor | float,
+                 next_q_target: th.Tensor) -> th.Tensor:
+    """Return DQN's TD target, ``(batch, 1)``: the target network's best next value."""
+    next_values = next_q_target.max(dim=1).values.reshape(-1, 1)
+    return rewards + (1 - dones) * discounts * next_values
+
+
+def random_shift(images: th.Tensor, pad: int, generator: th.Generator | None = None,
+                 ) -> th.Tensor:
+    """Shift each image of ``(N, C, H, W)`` by its own random offset of up to ``pad`` pixels.
+
+    The same as DrQ's augmentation: pad every side by ``pad`` pixels, replicating the edge,
+    then crop an ``H x W`` window at a random position (independent per image, uniform over
+    the ``(2 pad + 1)^2`` positions).  Done as one gather with clamped indices, on any dtype
+    (uint8 here, before SB3 scales the image); ``pad`` 0 returns the images unchanged.
+    """
+    if pad < 0:
+        raise ValueError(f'pad must be >= 0, got {pad}')
+    n, c, h, w = images.shape
+    if pad == 0 or n == 0:
+        return images
+    device = images.device
+    dy = th.randint(-pad, pad + 1, (n, 1), generator=generator, device=device)
+    dx = th.randint(-pad, pad + 1, (n, 1), generator=generator, device=device)
+    rows = (th.arange(h, device=device) + dy).clamp_(0, h - 1)
+    cols = (th.arange(w, device=device) + dx).clamp_(0, w - 1)
+    index = (rows[:, :, None] * w + cols[:, None, :]).reshape(n, 1, h * w).expand(n, c, h * w)
+    return images.reshape(n, c, h * w).gather(2, index).reshape(n, c, h, w)
+
+
+def dueling_q(values: th.Tensor, advantages: th.Tensor) -> th.Tensor:
+    """Combine ``V (N, 1)`` and ``A (N, actions)`` into ``Q = V + A - mean(A)`` (Wang et al.)."""
+    return values + advantages - advantages.mean(dim=1, keepdim=True)
+
+
+class DuelingQNetwork(QNetwork):
+    """SB3's Q-network with a dueling head: a value and an advantage stream on the features."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        """Build SB3's Q-network (its head becomes the advantage stream) and a value stream."""
+        super().__init__(*args, **kwargs)
+        self.value_net = nn.Sequential(*create_mlp(self.features_dim, 1, self.net_arch,
+                                                   self.activation_fn))
+
+    def forward(self, obs: th.Tensor) -> th.Tensor:
+        """Return the Q-values ``V + A - mean(A)``."""
+        features = self.extract_features(obs, self.features_extractor)
+        return dueling_q(self.value_net(features), self.q_net(features))
+
+
+class DuelingCnnPolicy(CnnPolicy):
+    """SB3's ``CnnPolicy`` for DQN whose online and target networks have a dueling head."""
+
+    def make_q_net(self) -> QNetwork:
+        """Return a :class:`DuelingQNetwork` with its own features extractor."""
+        net_args = self._update_features_extractor(self.net_args, features_extractor=None)
+        return DuelingQNetwork(**net_args).to(self.device)
+
+
+class SumTree:
+    """Priorities in a binary sum tree: O(log n) updates and proportional sampling, vectorised."""
+
+    def __init__(self, capacity: int) -> None:
+        """Hold ``capacity`` priorities, all zero."""
+        self.capacity = capacity
+        self.depth = max(capacity - 1, 0).bit_length()
+        self.leaves = 1 << self.depth
+        self.tree = np.zeros(2 * self.leaves, dtype=np.float64)
+
+    @property
+    def total(self) -> float:
+        """Return the sum of all priorities."""
+        return float(self.tree[1])
+
+    def get(self, indices: np.ndarray) -> np.ndarray:
+        """Return the priorities at ``indices``."""
+        return self.tree[self.leaves + np.asarray(indices)]
+
+    def set(self, indices: np.ndarray, priorities: np.ndarray) -> None:
+        """Set the priorities at ``indices`` (a repeated index keeps its last value)."""
+        nodes = self.leaves + np.asarray(indices, dtype=np.int64)
+        self.tree[nodes] = priorities
+        for _ in range(self.depth):
+            nodes = np.unique(nodes // 2)
+            self.tree[nodes] = self.tree[2 * nodes] + self.tree[2 * nodes + 1]
+
+    def find(self, masses: np.ndarray) -> np.ndarray:
+        """Return the index whose cumulative priority interval holds each of ``masses``."""
+        nodes = np.ones(len(masses), dtype=np.int64)
+        masses = np.asarray(masses, dtype=np.float64).copy()
+        while nodes[0] < self.leaves:
+            left = 2 * nodes
+            go_right = masses >= self.tree[left]
+            masses = np.where(go_right, masses - self.tree[left], masses)
+            nodes = np.where(go_right, left + 1, left)
+        return np.minimum(nodes - self.leaves, self.capacity - 1)
+
+
+class PrioritizedReplayBuffer(NStepReplayBuffer):
+    """Proportional prioritized replay (Schaul et al. 2016) over SB3's (n-step) replay buffer.
+
+    A new transition gets the largest priority seen so far; a sampled one gets
+    ``(|TD error| + eps) ** alpha`` once the learner has its TD error (``update_priorities``).
+    ``sample`` draws one index from each of ``batch_size`` equal slices of the total priority
+    (stratified, as the paper) and records the indices and the importance weights
+    ``(N P(i)) ** -beta``, divided by their largest in the batch, in ``last_indices`` and
+    ``last_weights``.  ``n_steps`` 1 is the one-step buffer.
+    """
+
+    def __init__(self, *args: Any, alpha: float = 0.6, beta: float = 0.4, n_steps: int = 1,
+                 **kwargs: Any) -> None:
+        """Create the buffer and its sum tree; ``beta`` is set by the learner as it anneals."""
+        super().__init__(*args, n_steps=n_steps, **kwargs)
+        if self.n_envs != 1:
+            raise ValueError('prioritized replay supports one environment')
+        self.alpha, self.beta = alpha, beta
+        self.priorities = SumTree(self.buffer_size)
+        self.max_priority = 1.0
+        self.last_indices = np.zeros(0, dtype=np.int64)
+        self.last_weights = np.zeros(0, dtype=np.float32)
+
+    def add(self, *args: Any, **kwargs: Any) -> None:
+        """Store a transition with the largest priority so far."""
+        index = self.pos
+        super().add(*args, **kwargs)
+        self.priorities.set(np.array([index]), np.array([self.max_priority ** self.alpha]))
+
+    def sample(self, batch_size: int, env: Any = None) -> ReplayBufferSamples:
+        """Sample proportionally to priority; see the class docstring for weights."""
+        size = self.buffer_size if self.full else self.pos
+        total = self.priorities.total
+        bounds = np.linspace(0.0, total, batch_size + 1)
+        masses = np.random.uniform(bounds[:-1], bounds[1:])
+        indices = np.minimum(self.priorities.find(masses), size - 1)
+        probabilities = self.priorities.get(indices) / total
+        weights = (size * np.maximum(probabilities, 1e-12)) ** -self.beta
+        self.last_indices = indices
+        self.last_weights = (weights / weights.max()).astype(np.float32)
+        return self._get_samples(indices, env=env)
+
+    def update_priorities(self, indices: np.ndarray, td_errors: np.ndarray) -> None:
+        """Set the priorities of sampled transitions from their absolute TD errors."""
+        priorities = np.abs(td_errors) + PRIORITY_EPS
+        self.max_priority = max(self.max_priority, float(priorities.max()))
+        self.priorities.set(indices, priorities ** self.alpha)
+
+
+class Learner(DQN):
+    """SB3's DQN whose gradient step adds the Double DQN target and the enabled components.
+
+    ``learner`` (a :class:`LearnerSpec`) says which; it is saved with the model, so a resumed
+    run trains the same learner, and a checkpoint loads with ``DQN.load`` as any other.
+    """
+
+    def __init__(self, *args: Any, learner: LearnerSpec | None = None, **kwargs: Any) -> None:
+        """Create SB3's DQN; ``learner`` defaults to the Double DQN learner."""
+        self.learner = learner or LearnerSpec()
+        super().__init__(*args, **kwargs)
+
+    def train(self, gradient_steps: int, batch_size: int = 100) -> None:
+        """Run ``gradient_steps`` gradient steps: SB3's ``DQN.train`` with the spec's changes."""
+        spec = self.learner
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        buffer = self.replay_buffer
+        prioritized = isinstance(buffer, PrioritizedReplayBuffer)
+        if prioritized:  # beta anneals linearly to 1 over training (Schaul et al.)
+            progress = 1.0 - self._current_progress_remaining
+            buffer.beta = spec.priority_beta + (1.0 - spec.priority_beta) * progress
+        losses = []
+        for _ in range(gradient_steps):
+            data = buffer.sample(batch_size, env=self._vec_normalize_env)
+            discounts = data.discounts if data.discounts is not None else self.gamma
+            obs, next_obs = data.observations, data.next_observations
+            if spec.augment_shift:
+                obs = random_shift(obs, spec.augment_shift)
+                next_obs = random_shift(next_obs, spec.augment_shift)
+            with th.no_grad():
+                next_q_target = self.q_net_target(next_obs)
+                if spec.double_q:
+                    target = double_q_target(data.rewards, data.dones, discounts,
+                                             self.q_net(next_obs), next_q_target)
+                else:
+                    target = max_q_target(data.rewards, data.dones, discounts, next_q_target)
+            current = th.gather(self.q_net(obs), dim=1, index=data.actions.long())
+            if prioritized:
+                weights = th.as_tensor(buffer.last_weights, device=self.device).reshape(-1, 1)
+                loss = (weights * F.smooth_l1_loss(current, target, reduction='none')).mean()
+                buffer.update_priorities(buffer.last_indices,
+                                         (current - target).detach().reshape(-1).cpu().numpy())
+            else:
+                loss = F.smooth_l1_loss(current, target)
+            losses.append(loss.item())
+            self.policy.optimizer.zero_grad()
+            loss.backward()
+            th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+            self.policy.optimizer.step()
+        self._n_updates += gradient_steps
+        self.logger.record('train/n_updates', self._n_updates, exclude='tensorboard')
+        self.logger.record('train/loss', np.mean(losses))
+
+
+def learner_kwargs(spec: LearnerSpec, gamma: float) -> dict[str, Any]:
+    """Return what ``DQN(...)`` needs for this learner beyond the hyperparameters.
+
+    Nothing for the vanilla learner (SB3's DQN as it is); otherwise the fused Adam, the learner
+    spec, and the replay buffer of n-step returns or prioritized replay.
+    """
+    if spec.vanilla:
+        return {}
+    kwargs: dict[str, Any] = {'policy_kwargs': {'optimizer_kwargs': {'fused': True}},
+                              'learner': spec}
+    if spec.prioritized_replay:
+        kwargs['replay_buffer_class'] = PrioritizedReplayBuffer
+        kwargs['replay_buffer_kwargs'] = {'alpha': spec.priority_alpha,
+                                          'beta': spec.priority_beta,
+                                          'n_steps': spec.n_steps, 'gamma': gamma}
+    else:
+        kwargs['n_steps'] = spec.n_steps
+    return kwargs
+
+
+def learner_policy(spec: LearnerSpec) -> str | type:
+    """Return the policy ``DQN(...)`` builds: SB3's CnnPolicy, or the dueling one."""
+    return DuelingCnnPolicy if spec.dueling else 'CnnPolicy'
+
+
+def learner_class(timing: Any | None = None, spec: LearnerSpec | None = None) -> type:
+    """Return the class that trains ``spec``, counting its work into ``timing``.
+
+    SB3's ``DQN`` for the vanilla learner, else :class:`Learner`.  ``timing`` is the env's step
+    budget (``env.timing``): ``train`` (gradient steps) and ``predict`` calls become the
+    learner's share of every env step.  A subclass, not wrappers set on the model, so the timing
+    never becomes model state that saving would pickle; a checkpoint of it loads with
+    ``DQN.load`` as any other.  Without ``timing`` the class itself is returned, untimed.
+    """
+    base = DQN if (spec or LearnerSpec()).vanilla else Learner
+    if timing is None:
+        return base
+
+    class TimedDQN(base):  # type: ignore[misc, valid-type]
+        """The learner with its ``train`` and ``predict`` timed."""
+
+        def train(self, *args: Any, **kwargs: Any) -> Any:
+            """Run the learner's gradient steps, timed as ``gradient_step``."""
+            start = time.perf_counter()
+            try:
+                return super().train(*args, **kwargs)
+            finally:
+                timing.add('gradient_step', time.perf_counter() - start)
+
+        def predict(self, *args: Any, **kwargs: Any) -> Any:
+            """Run SB3's ``predict``, timed as ``predict``."""
+            start = time.perf_counter()
+            try:
+                return super().predict(*args, **kwargs)
+            finally:
+                timing.add('predict', time.perf_counter() - start)
+
+    return TimedDQN
+
+
+def load_checkpoint(path: Path, spec: LearnerSpec | None = None, timing: Any | None = None,
+                    **kwargs: Any) -> Any:
+    """Load a checkpoint with the class that trains ``spec`` (SB3's ``DQN`` without one).
+
+    SB3 warns that ``n_steps`` "is ignored" whenever it loads a saved n-step model (the buffer
+    class it saved already is the n-step one): the warning is silenced here.  A resumed run
+    trains the learner its config names (``spec``), whatever the checkpoint saved.
+    """
+    cls = learner_class(timing, spec) if spec is not None else DQN
+    with warnings.catch_warnings():
+        warnings.filterwarnings('ignore', message='`n_steps=.*` is ignored because a custom')
+        model = cls.load(path, **kwargs)
+    if spec is not None and isinstance(model, Learner):
+        model.learner = spec
+    return model

@@ -1,0 +1,317 @@
+"""The policy node as a separate process, started the way ``ros2 run nav_gym policy`` starts it.
+
+A test node publishes images (rendered by the sim core, in every encoding the node takes) and
+listens to what the policy node sends: ``cmd_vel``, ``policy/decision`` and
+``policy/observation``.
+"""
+
+from __future__ import annotations
+
+import math
+import signal
+import subprocess
+import time
+from collections.abc import Iterator
+
+import cv2
+import numpy as np
+import pytest
+import rclpy
+from geometry_msgs.msg import Twist
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import Image, JointState
+
+from helpers import interrupt, make_tiny_run, wait_until
+from nav_gym.env.observation import image_msg_to_observation
+from nav_sim import interface
+from nav_sim.core.config import SimConfig
+from nav_sim.core.kinematics import twist_to_wheels
+from nav_sim.core.sim import NavSim
+from nav_sim.paths import executable_path
+from nav_sim.ros import messages as ros_msgs
+from nav_sim.ros import qos
+
+DEEP = QoSProfile(depth=100, reliability=qos.DECISIONS.reliability)
+#: how each encoding's bytes are made from RGB (mono8: from the RGB's grey)
+ENCODINGS = {'rgb8': None, 'bgr8': cv2.COLOR_RGB2BGR, 'rgba8': cv2.COLOR_RGB2RGBA,
+             'bgra8': cv2.COLOR_RGB2BGRA, 'mono8': cv2.COLOR_RGB2GRAY}
+
+
+def start_policy(*ros_args: str) -> subprocess.Popen:
+    executable = executable_path('nav_gym', 'policy')
+    return subprocess.Popen([str(executable), '--ros-args', *ros_args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+
+
+class Graph:
+    """A camera and a listener: publishes images, collects the policy node's messages."""
+
+    def __init__(self, namespace: str, image_topic: str = interface.IMAGE_TOPIC) -> None:
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node('policy_test', namespace=namespace, context=self.context)
+        self.camera = self.node.create_publisher(Image, image_topic, qos.OBSERVATION)
+        self.twists: list[Twist] = []
+        self.decisions: list[JointState] = []
+        self.observations: list[Image] = []
+        self.node.create_subscription(Twist, interface.CMD_VEL_TOPIC, self.twists.append,
+                                      QoSProfile(depth=100))
+        self.node.create_subscription(JointState, interface.DECISION_TOPIC,
+                                      self.decisions.append, DEEP)
+        self.node.create_subscription(Image, interface.POLICY_OBSERVATION_TOPIC,
+                                      self.observations.append, DEEP)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def spin_until(self, done, timeout: float, what: str, details=None):
+        def spun():
+            self.executor.spin_once(timeout_sec=0.02)
+            return done()
+        return wait_until(spun, timeout, what, interval=0, details=details)
+
+    def connected(self, timeout: float = 60.0, details=None) -> None:
+        """Wait until the policy node is up: it subscribes the camera and publishes decisions."""
+        self.spin_until(lambda: self.camera.get_subscription_count() > 0 and self.decisions,
+                        timeout, 'the policy node', details)
+
+    def publish(self, msg: Image) -> None:
+        self.camera.publish(msg)
+
+    def decision(self, msg: JointState) -> dict[str, float]:
+        return dict(zip(msg.name, msg.position, strict=True))
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        self.context.try_shutdown()
+
+
+@pytest.fixture
+def graph(namespace) -> Iterator[Graph]:
+    g = Graph(namespace)
+    yield g
+    g.close()
+
+
+@pytest.fixture(scope='module')
+def frames() -> list[np.ndarray]:
+    """Three rendered camera frames of one scenario (native 128x96 RGB)."""
+    sim = NavSim(SimConfig())
+    try:
+        sim.reset(101, 'train')
+        out = [sim.render()]
+        for _ in range(2):
+            sim.step(twist_to_wheels(0.12, 0.75, sim.config))
+            out.append(sim.render())
+        return out
+    finally:
+        sim.close()
+
+
+def encoded(rgb: np.ndarray, encoding: str, stamp_ns: int, pad: int = 0) -> Image:
+    """Return an Image of ``rgb`` in ``encoding`` with ``pad`` bytes of garbage per row."""
+    conversion = ENCODINGS[encoding]
+    pixels = rgb if conversion is None else cv2.cvtColor(rgb, conversion)
+    rows = pixels.reshape(rgb.shape[0], -1)
+    padded = np.full((rows.shape[0], rows.shape[1] + pad), 0xAB, np.uint8)
+    padded[:, :rows.shape[1]] = rows
+    msg = Image(height=rgb.shape[0], width=rgb.shape[1], encoding=encoding,
+                step=padded.shape[1])
+    msg.data = padded.tobytes()
+    msg.header.stamp = ros_msgs.stamp_from_ns(stamp_ns)
+    msg.header.frame_id = 'camera_optical_frame'
+    return msg
+
+
+def output(process: subprocess.Popen) -> str:
+    return interrupt(process)[1]
+
+
+def test_the_observation_is_byte_identical_to_the_envs_in_every_encoding_size_and_padding(
+        graph, namespace, frames):
+    process = start_policy('-r', f'__ns:={namespace}', '-p', 'policy:=servo',
+                           '-p', 'period:=0.05')
+    try:
+        graph.connected(details=lambda: output(process))
+        stamp = 1_000_000_000
+        cases = [(rgb, encoding, pad) for rgb in frames for encoding in ENCODINGS
+                 for pad in (0, 5)]
+        cases.append((cv2.resize(frames[0], (77, 53)), 'rgb8', 3))   # an odd size, padded
+        cases.append((cv2.resize(frames[1], (640, 480)), 'bgra8', 0))  # larger than native
+        env_rgb8 = {}
+        for rgb, encoding, pad in cases:
+            stamp += 1_000_000
+            msg = encoded(rgb, encoding, stamp, pad)
+
+            def observed(m=msg, s=stamp):
+                graph.publish(m)  # again, as a camera would: best effort may lose one
+                return next((o for o in graph.observations
+                             if ros_msgs.stamp_to_ns(o.header.stamp) == s), None)
+            got = graph.spin_until(observed, 10.0,
+                                   f'the observation of a {encoding} image (pad {pad})')
+            node_obs = np.frombuffer(got.data, np.uint8).reshape(84, 84, 3).transpose(2, 0, 1)
+            env_obs, _ = image_msg_to_observation(msg)  # what the env makes of the same image
+            assert np.array_equal(node_obs, env_obs), (encoding, pad, rgb.shape)
+            if encoding != 'mono8':  # every colour encoding of a frame gives one observation
+                assert np.array_equal(env_rgb8.setdefault(id(rgb), node_obs), node_obs)
+    finally:
+        code, text = interrupt(process)
+    assert code == 0 and 'Traceback' not in text, text
+
+
+def test_a_stale_camera_stops_the_robot_and_says_so_once(graph, namespace, frames):
+    process = start_policy('-r', f'__ns:={namespace}', '-p', 'policy:=servo',
+                           '-p', 'period:=0.05', '-p', 'image_timeout:=0.4')
+    try:
+        graph.connected(details=lambda: output(process))
+        assert graph.decision(graph.decisions[-1])['action'] == -1  # no image yet: stop
+        graph.publish(encoded(frames[0], 'rgb8', 5_000_000_000))
+        graph.spin_until(lambda: graph.decision(graph.decisions[-1])['action'] >= 0, 10.0,
+                         'a decision on the image')
+        moving = graph.twists[-1]
+        assert (moving.linear.x, moving.angular.z) != (0.0, 0.0)
+        started = time.monotonic()
+        graph.spin_until(lambda: graph.decision(graph.decisions[-1])['action'] == -1, 10.0,
+                         'a stop once the image is stale')
+        assert time.monotonic() - started < 1.5
+        stopped = graph.twists[-1]
+        assert (stopped.linear.x, stopped.angular.z) == (0.0, 0.0)
+        latest = graph.decision(graph.decisions[-1])
+        assert latest['image_age_ms'] > 400.0 and math.isnan(latest['q_left'])
+    finally:
+        code, text = interrupt(process)
+    assert code == 0, text
+    assert text.count('no image on') == 1, text  # at the start
+    assert text.count('no image newer than 0.400 s on') == 1, text  # once stale
+
+
+def test_an_unsupported_encoding_is_one_error_logged_once(graph, namespace, frames):
+    process = start_policy('-r', f'__ns:={namespace}', '-p', 'policy:=servo',
+                           '-p', 'period:=0.05')
+    try:
+        graph.connected(details=lambda: output(process))
+        bad = encoded(frames[0], 'rgb8', 9_000_000_000)
+        bad.encoding = '16UC1'
+        for _ in range(3):
+            graph.publish(bad)
+            graph.decisions.clear()
+            graph.spin_until(lambda: len(graph.decisions) > 5, 10.0, 'decisions')
+        assert graph.decision(graph.decisions[-1])['action'] == -1
+        assert (graph.twists[-1].linear.x, graph.twists[-1].angular.z) == (0.0, 0.0)
+    finally:
+        code, text = interrupt(process)
+    assert code == 0, text
+    assert text.count("unsupported image encoding '16UC1'") == 1, text
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_sigint_and_sigterm_leave_a_zero_twist_as_the_last_command(graph, namespace, frames,
+                                                                   sig):
+    process = start_policy('-r', f'__ns:={namespace}', '-p', 'policy:=servo',
+                           '-p', 'period:=0.05')
+    try:
+        graph.connected(details=lambda: output(process))
+        graph.publish(encoded(frames[0], 'rgb8', 3_000_000_000))
+        graph.spin_until(lambda: graph.twists and graph.twists[-1].angular.z != 0.0, 10.0,
+                         'a moving command')
+        process.send_signal(sig)
+        process.wait(15)
+        graph.spin_until(lambda: graph.twists[-1].angular.z == 0.0, 5.0, 'the zero Twist')
+    finally:
+        code, text = interrupt(process)
+    last = graph.twists[-1]
+    assert (last.linear.x, last.angular.z) == (0.0, 0.0)
+    assert code == 0 and 'Traceback' not in text, text
+
+
+@pytest.mark.parametrize(('args', 'code', 'expected'), [
+    (['-p', 'model:=/no/such/run'], 1, 'policy_node: model /no/such/run not found'),
+    (['-p', 'period:=abc', '-p', 'policy:=servo'], 2,
+     "policy_node: invalid configuration: parameter period takes a number, got 'abc'"),
+    (['-p', 'period:=1', '-p', 'policy:=servo'], 2,
+     'policy_node: invalid configuration: parameter period takes a double: write 1.0, not 1'),
+    (['-p', 'policy:=ppo'], 2, 'policy_node: invalid configuration: policy must be one of'),
+    (['-p', 'image_timeout:=-1.0', '-p', 'policy:=servo'], 2,
+     'policy_node: invalid configuration: image_timeout must be a finite number'),
+])
+def test_bad_models_and_parameters_are_one_line_and_a_non_zero_exit(namespace, args, code,
+                                                                     expected):
+    process = start_policy('-r', f'__ns:={namespace}', *args)
+    out, err = process.communicate(timeout=120)
+    out += err
+    assert process.returncode == code, out
+    lines = out.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(expected), out
+
+
+def test_a_corrupt_model_is_one_line(tmp_path, namespace):
+    bad = tmp_path / 'model.zip'
+    bad.write_bytes(b'PK not really')
+    process = start_policy('-r', f'__ns:={namespace}', '-p', f'model:={bad}')
+    out, err = process.communicate(timeout=120)
+    out += err
+    assert process.returncode == 1 and len(out.splitlines()) == 1, out
+    assert out.startswith(f'policy_node: cannot read the model {bad}'), out
+
+
+def test_remapping_a_params_file_and_runtime_parameters(tmp_path, namespace, frames):
+    params = tmp_path / 'policy.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    policy: servo\n    period: 0.05\n'
+                      '    perido: 1.0\n')
+    graph = Graph(namespace, image_topic=f'{namespace}/robot/camera/image')
+    process = start_policy('-r', f'__ns:={namespace}', '--params-file', str(params),
+                           '-r', f'camera/image_raw:={namespace}/robot/camera/image')
+    try:
+        graph.connected(details=lambda: output(process))
+        graph.publish(encoded(frames[0], 'rgb8', 2_000_000_000))
+        graph.spin_until(lambda: graph.decision(graph.decisions[-1])['action'] >= 0, 10.0,
+                         'a decision on the remapped camera')
+        from rcl_interfaces.srv import SetParameters
+        from rclpy.parameter import Parameter
+        client = graph.node.create_client(SetParameters,
+                                          f'{namespace}/policy_node/set_parameters')
+        assert client.wait_for_service(timeout_sec=10.0)
+
+        def set_values(**values):
+            request = SetParameters.Request(parameters=[
+                Parameter(k, value=v).to_parameter_msg() for k, v in values.items()])
+            future = client.call_async(request)
+            graph.spin_until(future.done, 10.0, 'set_parameters')
+            return future.result().results
+
+        refused = set_values(period=-0.5)[0]
+        assert not refused.successful and 'period must be a finite number' in refused.reason
+        assert not set_values(period='fast')[0].successful
+        assert not set_values(model='/elsewhere')[0].successful  # read-only
+        assert set_values(image_timeout=2)[0].successful  # an integer converts to a double
+    finally:
+        code, text = interrupt(process)
+        graph.close()
+    assert code == 0, text
+    assert "unknown parameter 'perido' ignored (did you mean period?)" in text, text
+
+
+def test_a_dqn_run_decides_with_its_q_values_and_its_runs_actions(tmp_path, namespace, frames,
+                                                                   spaces_only, graph):
+    run = make_tiny_run(tmp_path, spaces_only, forward_speed=0.2, turn_rate=1.0)
+    process = start_policy('-r', f'__ns:={namespace}', '-p', f'model:={run}',
+                           '-p', 'period:=0.05')
+    try:
+        graph.connected(details=lambda: output(process))
+        graph.publish(encoded(frames[1], 'bgr8', 4_000_000_000))
+        decision = graph.decision(graph.spin_until(
+            lambda: next((d for d in reversed(graph.decisions)
+                          if ros_msgs.stamp_to_ns(d.header.stamp) == 4_000_000_000), None),
+            20.0, 'a decision on the image'))
+        q_values = [decision['q_left'], decision['q_forward'], decision['q_right']]
+        assert all(math.isfinite(q) for q in q_values)
+        assert decision['action'] == int(np.argmax(q_values))
+        twist = {0: (0.03, 1.0), 1: (0.2, 0.0), 2: (0.03, -1.0)}[int(decision['action'])]
+        assert (decision['linear'], decision['angular']) == twist
+        assert decision['inference_ms'] > 0.0 and decision['image_age_ms'] >= 0.0
+    finally:
+        code, text = interrupt(process)
+    assert code == 0 and 'Traceback' not in text, text
+    assert f'from {run}/config.yaml' in text

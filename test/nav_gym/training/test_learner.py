@@ -1,0 +1,217 @@
+"""The learner: Double DQN targets by default, and each component on constructed tensors."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch as th
+from gymnasium import spaces
+from stable_baselines3 import DQN
+from stable_baselines3.common.buffers import NStepReplayBuffer
+
+from nav_gym.training.config import COMPONENTS, LearnerSpec, TrainConfig
+from nav_gym.training.learner import (
+    DuelingCnnPolicy,
+    DuelingQNetwork,
+    Learner,
+    PrioritizedReplayBuffer,
+    SumTree,
+    double_q_target,
+    dueling_q,
+    learner_class,
+    learner_kwargs,
+    learner_policy,
+    load_checkpoint,
+    max_q_target,
+    random_shift,
+)
+
+OBS = spaces.Box(0, 255, (3, 84, 84), np.uint8)
+ACTIONS = spaces.Discrete(3)
+
+
+def test_the_online_network_picks_and_the_target_network_values():
+    online = th.tensor([[1.0, 3.0, 2.0], [5.0, 0.0, 0.0]])
+    target = th.tensor([[9.0, 4.0, 7.0], [2.0, 8.0, 8.0]])
+    rewards = th.tensor([[0.5], [1.0]])
+    dones = th.tensor([[0.0], [1.0]])
+    out = double_q_target(rewards, dones, 0.9, online, target)
+    # row 0: online argmax is action 1, valued 4 by the target network (DQN would take 9)
+    assert out.flatten().tolist() == pytest.approx([0.5 + 0.9 * 4.0, 1.0])
+    assert max_q_target(rewards, dones, 0.9, target).flatten().tolist() == pytest.approx(
+        [0.5 + 0.9 * 9.0, 1.0])
+
+
+def test_double_dqn_with_3_step_returns_is_the_default_and_sb3_dqn_is_one_file_away():
+    assert TrainConfig().double_q is True and TrainConfig().n_steps == 3
+    assert TrainConfig().learner() == LearnerSpec()
+    assert learner_class(None, LearnerSpec()) is Learner
+    vanilla = TrainConfig(double_q=False, n_steps=1).learner()  # config/workshop.yaml
+    assert vanilla.vanilla and learner_class(None, vanilla) is DQN  # SB3's own, untouched
+    assert learner_kwargs(vanilla, 0.99) == {} and learner_policy(vanilla) == 'CnnPolicy'
+    assert issubclass(learner_class(object(), LearnerSpec()), Learner)  # timed, too
+    assert not TrainConfig(double_q=False, n_steps=3).learner().vanilla
+    assert 'double_q' not in TrainConfig().dqn_kwargs()  # not an SB3 argument
+
+
+def test_every_component_has_a_flag_and_a_value_that_turns_it_off():
+    spec = LearnerSpec()
+    assert (spec.n_steps, spec.dueling, spec.augment_shift, spec.prioritized_replay) == (
+        3, False, 0, False)  # n-step returns adopted (docs/experiments.md), the others off
+    assert spec.describe() == ('DQN (SB3) with Double DQN targets (van Hasselt et al. 2016), '
+                               '3-step returns')
+    off = LearnerSpec(**COMPONENTS)
+    assert off.describe() == 'DQN (SB3) with Double DQN targets (van Hasselt et al. 2016)'
+    assert dataclasses.replace(off, double_q=False).vanilla
+    full = LearnerSpec(n_steps=3, dueling=True, augment_shift=4, prioritized_replay=True)
+    for part in ('Double DQN', '3-step returns', 'dueling head', 'up to 4 px', 'prioritized'):
+        assert part in full.describe()
+    for name in ('n_steps', 'dueling', 'augment_shift', 'prioritized_replay', 'priority_alpha',
+                 'priority_beta'):
+        assert name in {f.name for f in dataclasses.fields(TrainConfig)}
+
+
+@pytest.mark.parametrize('bad', [{'n_steps': 0}, {'augment_shift': -1}, {'priority_alpha': 1.5},
+                                 {'priority_beta': -0.1}])
+def test_a_bad_learner_setting_is_a_clear_error(bad):
+    from nav_gym.errors import TrainConfigError
+    with pytest.raises(TrainConfigError, match=next(iter(bad))):
+        TrainConfig(**bad)
+
+
+# --- n-step returns: SB3's buffer, as this learner samples it ----------------------------------
+def _buffer(cls=NStepReplayBuffer, **kwargs) -> NStepReplayBuffer:
+    return cls(16, spaces.Box(-1, 1, (1,), np.float32), ACTIONS, device='cpu', n_steps=3,
+               gamma=0.5, **kwargs)
+
+
+def _add(buffer, rewards: list[float], ends: dict[int, str]) -> None:
+    """Add transitions t = 0.. with observation t; ``ends``: t -> 'goal' or 'timeout'."""
+    for t, reward in enumerate(rewards):
+        event = ends.get(t)
+        info = {'TimeLimit.truncated': event == 'timeout'}
+        buffer.add(np.array([[t]], np.float32), np.array([[t + 1]], np.float32),
+                   np.array([[1]]), np.array([reward]), np.array([event is not None]), [info])
+
+
+def test_n_step_targets_stop_at_an_episode_end_and_bootstrap_after_a_time_out():
+    buffer = _buffer()
+    # episode A: t0, t1 end in a goal at t1; episode B: t2..t5 truncated at t5; t6..t8 go on
+    _add(buffer, [1.0, 2.0, 1.0, 1.0, 1.0, 4.0, 1.0, 1.0, 1.0, 1.0], {1: 'goal', 5: 'timeout'})
+    data = buffer._get_samples(np.array([0, 1, 3, 4, 6]))
+    returns = data.rewards.flatten().tolist()
+    discounts = data.discounts.flatten().tolist()
+    done = data.dones.flatten().tolist()
+    nexts = data.next_observations.flatten().tolist()
+    # t0: 1 + 0.5 * 2, then the goal ends it: no bootstrap
+    assert (returns[0], done[0], nexts[0]) == (pytest.approx(2.0), 1.0, 2.0)
+    assert (returns[1], done[1]) == (pytest.approx(2.0), 1.0)
+    # t3: 1 + 0.5 * 1 + 0.25 * 4, truncated at t5: bootstrap from t5's next observation
+    assert (returns[2], discounts[2], done[2], nexts[2]) == (pytest.approx(2.5), 0.125, 0.0, 6.0)
+    assert (returns[3], discounts[3], done[3]) == (pytest.approx(3.0), 0.25, 0.0)
+    # t6: three steps inside an episode, bootstrapped with gamma ** 3
+    assert (returns[4], discounts[4], done[4], nexts[4]) == (pytest.approx(1.75), 0.125, 0.0, 9.0)
+
+
+# --- the dueling head ---------------------------------------------------------------------------
+def test_the_dueling_aggregation_centres_the_advantages():
+    values = th.tensor([[2.0], [-1.0]])
+    advantages = th.tensor([[1.0, 2.0, 3.0], [0.0, 0.0, 6.0]])
+    q = dueling_q(values, advantages)
+    assert q.tolist() == [[1.0, 2.0, 3.0], [-3.0, -3.0, 3.0]]
+    assert (q.mean(dim=1, keepdim=True) == values).all()  # V is the mean of the Q-values
+    assert (q.argmax(dim=1) == advantages.argmax(dim=1)).all()  # A alone picks the action
+
+
+def test_the_dueling_policy_combines_its_two_streams(spaces_only):
+    model = DQN(DuelingCnnPolicy, spaces_only(), buffer_size=64, device='cpu', seed=0)
+    network = model.q_net
+    assert isinstance(network, DuelingQNetwork) and isinstance(model.q_net_target,
+                                                               DuelingQNetwork)
+    obs = th.as_tensor(np.stack([OBS.sample(), OBS.sample()]))
+    features = network.extract_features(obs, network.features_extractor)
+    expected = dueling_q(network.value_net(features), network.q_net(features))
+    assert th.allclose(network(obs), expected)
+
+
+# --- random shifts (DrQ) ------------------------------------------------------------------------
+def test_a_shift_of_0_pixels_is_the_identity():
+    images = th.randint(0, 256, (5, 3, 84, 84), dtype=th.uint8)
+    assert random_shift(images, 0) is images
+
+
+def test_a_shift_keeps_shape_and_dtype_and_one_seed_gives_one_result():
+    images = th.randint(0, 256, (8, 3, 84, 84), dtype=th.uint8)
+    first = random_shift(images, 4, th.Generator().manual_seed(7))
+    assert first.shape == images.shape and first.dtype == th.uint8
+    assert th.equal(first, random_shift(images, 4, th.Generator().manual_seed(7)))
+    assert not th.equal(first, random_shift(images, 4, th.Generator().manual_seed(8)))
+
+
+def test_a_shift_is_replicate_padding_then_a_crop_per_image():
+    images = th.arange(2 * 1 * 6 * 6, dtype=th.float32).reshape(2, 1, 6, 6)
+    generator = th.Generator().manual_seed(3)
+    shifted = random_shift(images, 2, generator)
+    padded = th.nn.functional.pad(images, (2, 2, 2, 2), mode='replicate')
+    found = []
+    for i in range(2):  # each image is one of the 25 crops of its own padded image
+        crops = [(dy, dx) for dy in range(5) for dx in range(5)
+                 if th.equal(shifted[i], padded[i, :, dy:dy + 6, dx:dx + 6])]
+        assert len(crops) == 1
+        found.append(crops[0])
+    assert found != [(2, 2), (2, 2)]  # not both left in place
+
+
+# --- prioritized replay -------------------------------------------------------------------------
+def test_the_sum_tree_sums_and_finds_proportionally():
+    tree = SumTree(5)
+    tree.set(np.array([0, 1, 2, 3, 4]), np.array([1.0, 0.0, 3.0, 2.0, 4.0]))
+    assert tree.total == 10.0
+    # cumulative intervals: [0,1) -> 0, [1,4) -> 2 (1 has none), [4,6) -> 3, [6,10) -> 4
+    assert tree.find(np.array([0.5, 1.0, 3.9, 4.0, 9.99])).tolist() == [0, 2, 2, 3, 4]
+    tree.set(np.array([2]), np.array([0.5]))
+    assert tree.total == 7.5 and tree.get(np.array([2])).tolist() == [0.5]
+
+
+def test_priorities_follow_td_errors_and_weights_correct_the_sampling():
+    buffer = _buffer(PrioritizedReplayBuffer, alpha=0.5, beta=1.0)
+    _add(buffer, [0.0] * 4, {})
+    assert buffer.priorities.get(np.arange(4)).tolist() == [1.0] * 4  # max priority at first
+    buffer.update_priorities(np.array([0, 1, 2, 3]), np.array([3.0, -8.0, 0.0, 0.0]))
+    expected = (np.array([3.0, 8.0, 0.0, 0.0]) + 1e-6) ** 0.5
+    np.testing.assert_allclose(buffer.priorities.get(np.arange(4)), expected)
+    np.random.seed(0)
+    counts = np.zeros(4)
+    for _ in range(400):
+        buffer.sample(4)
+        counts += np.bincount(buffer.last_indices, minlength=4)
+        probabilities = expected[buffer.last_indices] / expected.sum()
+        weights = (4 * probabilities) ** -1.0
+        np.testing.assert_allclose(buffer.last_weights, weights / weights.max(), rtol=1e-5)
+    # a zero TD error keeps only eps: about 0.02 % of the draws (0.4 of 1,600 expected)
+    assert counts[2] + counts[3] <= 3
+    assert counts[1] / counts[0] == pytest.approx(np.sqrt(8 / 3), rel=0.15)
+    _add(buffer, [0.0], {})
+    assert buffer.priorities.get(np.array([4])).tolist() == [pytest.approx(np.sqrt(8.0), 1e-5)]
+
+
+# --- the learner trains, saves and loads --------------------------------------------------------
+@pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')  # SB3's own, on any n-step load
+@pytest.mark.parametrize('spec', [LearnerSpec(), LearnerSpec(augment_shift=4, n_steps=3),
+                                  LearnerSpec(dueling=True, prioritized_replay=True)],
+                         ids=['default', 'shift+nstep', 'dueling+per'])
+def test_a_checkpoint_of_the_learner_loads_with_dqn_load(tmp_path, spaces_only, spec):
+    model = learner_class(None, spec)(learner_policy(spec), spaces_only(), buffer_size=200,
+                                      learning_starts=40, batch_size=8, train_freq=4, seed=1,
+                                      device='cpu', **learner_kwargs(spec, 0.99))
+    model.learn(120)
+    assert model._n_updates > 0
+    model.save(tmp_path / 'model.zip')
+    loaded = DQN.load(tmp_path / 'model.zip', device='cpu')
+    obs = spaces_only().reset()[0]
+    assert loaded.predict(obs, deterministic=True)[0] == model.predict(obs, deterministic=True)[0]
+    resumed = load_checkpoint(tmp_path / 'model.zip', spec, device='cpu')
+    assert isinstance(resumed, Learner) and resumed.learner == spec
+    assert model.policy.optimizer.defaults['fused'] is True

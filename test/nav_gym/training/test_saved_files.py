@@ -1,0 +1,57 @@
+"""Files saved before the house move still load and resume (SB3 pickles classes by path).
+
+``data/dqn_32_steps.zip`` and ``data/replay_buffer.pkl`` were written by the code of commit
+e6356e5, before nav_gym's modules moved into sub-packages: a learner with a dueling head,
+prioritized replay and 3-step returns (a small feature layer keeps the files small), 32 steps
+on random frames.  The checkpoint pickles ``nav_gym.learner.DuelingCnnPolicy`` and
+``nav_gym.train_config.LearnerSpec``; the buffer is a ``nav_gym.learner.PrioritizedReplayBuffer``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+
+from nav_gym.training.config import LearnerSpec
+from nav_gym.training.learner import (
+    DuelingCnnPolicy,
+    Learner,
+    PrioritizedReplayBuffer,
+    load_checkpoint,
+)
+
+DATA = Path(__file__).parent / 'data'
+
+
+class Frames(gym.Env):
+    """Random camera-sized frames: the saved model's spaces, without a sim."""
+
+    observation_space = gym.spaces.Box(0, 255, (3, 84, 84), np.uint8)
+    action_space = gym.spaces.Discrete(3)
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.t = 0
+        return self.observation_space.sample(), {}
+
+    def step(self, action):
+        self.t += 1
+        return self.observation_space.sample(), float(action == 1), self.t >= 7, False, {}
+
+
+def test_a_checkpoint_and_replay_buffer_saved_before_the_move_resume():
+    spec = LearnerSpec(dueling=True, prioritized_replay=True, n_steps=3)
+    model = load_checkpoint(DATA / 'dqn_32_steps.zip', spec, env=Frames(), device='cpu')
+    assert isinstance(model, Learner) and isinstance(model.policy, DuelingCnnPolicy)
+    assert model.num_timesteps == 32 and model.learner == spec
+    model.load_replay_buffer(DATA / 'replay_buffer.pkl')
+    buffer = model.replay_buffer
+    assert isinstance(buffer, PrioritizedReplayBuffer) and buffer.size() == 32
+    assert buffer.observations.dtype == np.uint8 and buffer.observations.any()
+    before = [p.detach().clone() for p in model.policy.parameters()]
+    model.learn(16, reset_num_timesteps=False)  # resumes: collects, samples, updates
+    assert model.num_timesteps == 48 and buffer.size() == 48
+    assert any(not (a == b.detach()).all() for a, b in zip(before, model.policy.parameters(),
+                                                             strict=True))
