@@ -5,10 +5,10 @@
                                                 [--closed-loop-seeds 201-210]
 
 1. **Inference** (in process, no ROS): one decision of the policy node (:class:`Controller`:
-   the env's observation from a fresh 128x96 image, then one forward pass that gives the greedy
-   action and the Q-values) against the evaluation's DQN policy on the same observations
-   (``predict(deterministic=True)`` and the Q-values: two forward passes): median and p99 of
-   each and their ratio.
+   the env's observation from a fresh 128x96 image, then the actor's one forward pass that
+   gives the greedy action and the Q-values) against the evaluation's DQN policy acting on the
+   same, ready observations (the same greedy step, :class:`nav_gym.policy.actors.DQNActor`,
+   without the image conversion): median and p99 of each and their ratio.
 2. **Throughput**: images per second the node turns into decisions, when a camera publishes as
    fast as it can and the node decides every millisecond (distinct image stamps decided on per
    second), against the same decisions in process.
@@ -216,7 +216,7 @@ def main() -> None:
         node, policy = inference(run, images)
         print(f'1. decision in process, {len(node)} fresh images (observation + network):')
         print(f'   policy node (one forward pass, argmax + Q):   {quantiles(node)}')
-        print(f'   evaluation DQNPolicy (predict + Q-values):     {quantiles(policy)}')
+        print(f'   evaluation DQNPolicy (the same step, no image):  {quantiles(policy)}')
         print(f'   ratio node / evaluation (medians):             '
               f'{np.median(node) / np.median(policy):7.2f}', flush=True)
         rate = throughput(run, images, args.seconds)

@@ -166,6 +166,8 @@ def check_reward(steps: Sequence[dict], initial_distance: float,
     v = LayerVerdict(LAYERS[2])
     previous, bad, sums = initial_distance, [], Counter()
     for s in steps:
+        # written out again on purpose, not nav_gym.env.reward.reward_terms: a check that
+        # called the env's own formula would agree with it when the formula is wrong
         expected = {'progress': weights['progress_weight'] * (previous - s['distance']),
                     'step': weights['step_penalty'],
                     'goal': weights['goal_reward'] if s['event'] == EVENT_GOAL else 0.0,

@@ -71,6 +71,7 @@ class Controller:
         self._last: Command | None = None
         self._last_image: Any = None
         self.image_error = ''  # why the newest image could not be converted
+        actor.begin_episode(None)  # the node's first episode starts with it (seed unknown)
 
     def on_image(self, msg: Any, received: float | None = None) -> None:
         """Keep ``msg`` (a sensor_msgs/Image) as the newest image, received now by default."""

@@ -349,16 +349,16 @@ def test_configuration_and_trial_names_and_those_of_older_sweeps(tmp_path):
     (0, 0, True), (None, 0, True), (130, 130, False), (1, 1, False), ('bad', 1, False)])
 def test_a_trial_child_evaluates_only_after_a_finished_training(monkeypatch, exit_code,
                                                                 returned, evaluated):
-    import nav_gym.train
     from nav_eval.sweeps import trial as sweep_trial
+    from nav_gym.training import trainer
     calls = []
 
-    def train_main(argv):
-        calls.append(('train', argv))
+    def run_training(args):  # nav-gym-train's body, as the trial calls it
+        calls.append(('train', args.seed))
         raise SystemExit(exit_code)
 
-    monkeypatch.setattr(nav_gym.train, 'main', train_main)
+    monkeypatch.setattr(trainer, 'run_training', run_training)
     monkeypatch.setattr(sweep_trial, 'train_args', lambda trial: ['--seed', '1'])
     monkeypatch.setattr(sweep_trial, 'evaluate_trial', lambda trial: calls.append(('evaluate',)))
     assert sweep_trial.train_and_evaluate({'name': 'seed1'}) == returned
-    assert calls == [('train', ['--seed', '1'])] + ([('evaluate',)] if evaluated else [])
+    assert calls == [('train', '1')] + ([('evaluate',)] if evaluated else [])

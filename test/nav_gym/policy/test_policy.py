@@ -37,12 +37,24 @@ def image(rgb: np.ndarray, stamp_s: int = 7, encoding: str = 'rgb8') -> SimpleNa
 class Counting:
     """An actor that counts its calls and always drives forward."""
 
+    name = 'counting'
+
     def __init__(self) -> None:
         self.observations: list[np.ndarray] = []
+        self.episodes: list[int | None] = []
+
+    def begin_episode(self, seed):
+        self.episodes.append(seed)
 
     def act(self, observation):
         self.observations.append(observation)
         return 1, (0.1, 0.5, 0.2)
+
+
+def test_the_controller_begins_its_actors_first_episode():
+    actor = Counting()
+    controller(actor)
+    assert actor.episodes == [None] and actor.observations == []
 
 
 def controller(actor=None, timeout: float = 1.0):
