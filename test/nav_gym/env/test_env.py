@@ -27,6 +27,9 @@ from nav_sim.ros.sim_graph import CONFLICT
 def test_registered_with_gymnasium():
     assert nav_gym.ENV_ID == 'visnav/Navigation-v0'
     assert nav_gym.ENV_ID in gym.registry
+    # what gym.make (and rl-baselines3-zoo's --gym-packages nav_gym) loads is the env class
+    from gymnasium.envs.registration import load_env_creator
+    assert load_env_creator(gym.spec(nav_gym.ENV_ID).entry_point) is NavigationEnv
 
 
 def test_spaces_and_observations(env):
