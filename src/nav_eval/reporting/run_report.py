@@ -2,10 +2,11 @@
 
 Reads what the other commands left in RUN_DIR (validation.json, summary.json, monitor.csv,
 checkpoints/, eval/results.json, eval/traces/, eval/diagnosis.*, eval_closed_loop/results.json)
-and writes
-RUN_DIR/report/Result.md, RUN_DIR/report/Result.html, RUN_DIR/report/figures/*.png and the
-rollout videos RUN_DIR/report/videos/*.mp4 (:mod:`nav_eval.reporting.videos`).  Every section is
-written; one whose input is missing says which command produces it.
+and writes RUN_DIR/report/Result.md and Result.html.  :func:`write_report` first has the
+figures drawn into RUN_DIR/report/figures/ (:mod:`nav_eval.reporting.run_figures`) and the
+rollout videos encoded into RUN_DIR/report/videos/ (:mod:`nav_eval.reporting.videos`); the
+sections then only build text from what was made.  Every section is written; one whose input
+is missing says which command produces it.
 """
 
 from __future__ import annotations
