@@ -14,14 +14,15 @@ from typing import Any
 
 from nav_eval.analysis import metrics
 from nav_eval.errors import EvaluationError
-from nav_eval.evaluation.policies import OraclePolicy, Policy, RandomPolicy, ServoPolicy
+from nav_eval.evaluation.policies import OraclePolicy, RandomPolicy, ServoPolicy
 from nav_eval.evaluation.runner import env_for_run, run_episode
 from nav_eval.evaluation.sets import BASELINE_POLICIES
+from nav_gym.policy.actors import Actor
 from nav_gym.training.config import TrainConfig
 from nav_sim.core.config import HELDOUT, SPLITS, TRAIN, SimConfig
 
 
-def make_policy(name: str, config: TrainConfig) -> Policy:
+def make_policy(name: str, config: TrainConfig) -> Actor:
     """Make the baseline policy ``name`` for the actions and camera of ``config``."""
     if name == 'random':
         return RandomPolicy()

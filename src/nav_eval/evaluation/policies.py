@@ -17,14 +17,10 @@ import numpy as np
 
 from nav_eval.errors import EvaluationError
 from nav_gym.env.actions import action_twists
-from nav_gym.policy.actors import Actor, DQNActor, ServoActor
+from nav_gym.policy.actors import DQNActor, ServoActor
 from nav_sim.core.planner import Planner
 from nav_sim.core.scenarios import build_banks, sample_scenario
 from nav_sim.core.world import load_arena
-
-#: what evaluation needs of a policy: nav_gym's one acting protocol (an episode start, an
-#: action per image)
-Policy = Actor
 
 
 class RandomPolicy:

@@ -20,11 +20,12 @@ import numpy as np
 
 from nav_eval.analysis import metrics
 from nav_eval.errors import EvaluationError
-from nav_eval.evaluation.policies import DQNPolicy, ExploringDQNPolicy, Policy, RandomPolicy
+from nav_eval.evaluation.policies import DQNPolicy, ExploringDQNPolicy, RandomPolicy
 from nav_eval.evaluation.sets import EvalSet, run_config
 from nav_eval.seeds import seed_range
 from nav_gym.env.navigation import NavigationEnv
 from nav_gym.errors import TrainConfigError
+from nav_gym.policy.actors import Actor
 from nav_gym.training.config import TrainConfig
 from nav_gym.training.run_dir import (
     BAGS,
@@ -46,7 +47,7 @@ SIM_COUNTERS = ('episode', 'period', 'stamp_ns')
 WARM_UP_WAIT_S = 0.5  # how long a warm-up period may take to reach the recorder
 
 
-def run_episode(env: NavigationEnv, policy: Policy, seed: int, split: str,
+def run_episode(env: NavigationEnv, policy: Actor, seed: int, split: str,
                 recorder: Any = None) -> tuple[metrics.EpisodeResult, dict, np.ndarray]:
     """One episode: returns its result, its per-step trace and its observations."""
     obs, info = env.reset(seed=seed, options={'split': split})
@@ -115,7 +116,7 @@ def arena_description(sim_params: dict[str, Any]) -> dict[str, Any]:
                        for s in geometry.shapes]}
 
 
-def make_policy(kind: str, run_dir: Path, checkpoint: str | None) -> Policy:
+def make_policy(kind: str, run_dir: Path, checkpoint: str | None) -> Actor:
     """Return the policy of an evaluation set or trace (``sets.SET_POLICIES``' values)."""
     if kind == 'random':
         return RandomPolicy()

@@ -42,24 +42,21 @@ STEP_TOPIC = '/visnav/step'
 TRAINING_TOPIC = '/visnav/training'
 DECISION_TOPIC = f'/{interface.DECISION_TOPIC}'  # the policy node's decisions
 
-IMAGE_TYPE = interface.IMAGE_TYPE
-DIAGNOSTIC_TYPE = interface.EVENT_TYPE
 MARKERS_TYPE = 'visualization_msgs/msg/MarkerArray'
 STEP_TYPE = 'visnav_msgs/msg/EnvStep'
 TRAINING_TYPE = 'visnav_msgs/msg/TrainingStats'
-DECISION_TYPE = interface.DECISION_TYPE  # named numbers with a header: what Foxglove plots
 
 #: topic -> ROS 2 type, for every topic a live view may advertise
 TOPIC_TYPES = {
-    CAMERA_TOPIC: IMAGE_TYPE,
-    EVENT_TOPIC: DIAGNOSTIC_TYPE,
-    DIAGNOSTICS_TOPIC: DIAGNOSTIC_TYPE,
+    CAMERA_TOPIC: interface.IMAGE_TYPE,
+    EVENT_TOPIC: interface.EVENT_TYPE,
+    DIAGNOSTICS_TOPIC: interface.EVENT_TYPE,
     SCENE_TOPIC: MARKERS_TYPE,
     ROBOT_TOPIC: MARKERS_TYPE,
-    OBSERVATION_TOPIC: IMAGE_TYPE,
+    OBSERVATION_TOPIC: interface.IMAGE_TYPE,
     STEP_TOPIC: STEP_TYPE,
     TRAINING_TOPIC: TRAINING_TYPE,
-    DECISION_TOPIC: DECISION_TYPE,
+    DECISION_TOPIC: interface.DECISION_TYPE,
 }
 #: what a standalone sim node's live view serves
 SIM_TOPICS = (CAMERA_TOPIC, EVENT_TOPIC, DIAGNOSTICS_TOPIC, SCENE_TOPIC, ROBOT_TOPIC)
@@ -139,7 +136,7 @@ def _header(stamp_ns: int, frame_id: str) -> Any:
 def image(rgb: np.ndarray, stamp_ns: int, frame_id: str) -> Any:
     """Build an ``rgb8`` sensor_msgs/Image of an (H, W, 3) uint8 array."""
     height, width, _ = rgb.shape
-    return _T[IMAGE_TYPE](header=_header(stamp_ns, frame_id), height=height, width=width,
+    return _T[interface.IMAGE_TYPE](header=_header(stamp_ns, frame_id), height=height, width=width,
                           encoding='rgb8', is_bigendian=0, step=width * 3,
                           data=np.ascontiguousarray(rgb, dtype=np.uint8).reshape(-1))
 
@@ -152,7 +149,7 @@ def observation_image(obs: np.ndarray, stamp_ns: int) -> Any:
 def diagnostics(statuses: list[tuple[str, str, dict[str, Any]]], stamp_ns: int) -> Any:
     """Build a DiagnosticArray of ``(name, message, key/values)`` statuses, level OK."""
     kv, status = _T['diagnostic_msgs/msg/KeyValue'], _T['diagnostic_msgs/msg/DiagnosticStatus']
-    return _T[DIAGNOSTIC_TYPE](header=_header(stamp_ns, ''), status=[
+    return _T[interface.EVENT_TYPE](header=_header(stamp_ns, ''), status=[
         status(level=bytes([0]), name=name, message=message, hardware_id='visnav',
                values=[kv(key=k, value=str(v)) for k, v in values.items()])
         for name, message, values in statuses])
