@@ -3,6 +3,12 @@
     .venv/bin/python benchmarks/bench_learner.py [--set KEY=V ...] [--gradient-steps 200]
         [--rounds 5] [--train-steps 6000] [--train-repeats 1] [--threads N]
 
+0. **The floor**: the plain PyTorch gradient step of the same computation, in the same run:
+   SB3's NatureCNN and head (online and target), a batch sampled from a 50,000-transition uint8
+   buffer in memory with its n-step returns precomputed, the uint8 -> float conversion, the
+   learner's target rule (Double DQN or the max), the Huber loss, Adam, gradient clipping,
+   nothing else.  Timed phase by phase (``torch`` runs synchronously on the CPU).  The
+   learner's gradient step (part 1) is printed as a ratio to it: the issue-29 target is 1.15.
 1. **The gradient step alone** (no ROS): both learners on an env with only the observation and
    action spaces, their replay buffers filled by ``learning_starts`` steps, then rounds of
    ``--gradient-steps`` gradient steps each, alternating (A B A B ...): the median time per
@@ -54,11 +60,16 @@ from nav_gym.training.run_dir import SUMMARY  # noqa: E402
 
 #: where a gradient step's time goes: a name -> the calls whose cumulative time it is
 PHASES = {'sampling': ('buffers.py', 'sample'),
+          'uint8 -> float': ('preprocessing.py', 'preprocess_obs'),
           'augmentation': ('learner.py', 'random_shift'),
           'forward passes': ('module.py', '_call_impl'),
           'backward pass': ('_tensor.py', 'backward'),
           'gradient clipping': ('clip_grad.py', 'clip_grad_norm_'),
-          'optimiser': ('optimizer.py', 'wrapper')}
+          'optimiser': ('optimizer.py', 'wrapper'),
+          'logging': ('logger.py', 'record')}
+FLOOR_PHASES = ('sampling', 'uint8 -> float', 'forward passes', 'backward pass',
+                'gradient clipping', 'optimiser')
+FLOOR_BUFFER = 50_000
 
 
 class SpacesOnly(gym.Env):
@@ -120,13 +131,93 @@ def breakdown(model: Any, steps: int, batch_size: int) -> dict[str, float]:
     return shares
 
 
+class Floor:
+    """The plain PyTorch gradient step of the learner's computation (part 0)."""
+
+    def __init__(self, config: train_config.TrainConfig, model: Any) -> None:
+        """Copy the learner's networks; fill a 50,000-transition uint8 buffer at random."""
+        import copy
+        self.config, self.learner = config, config.learner()
+        self.online = copy.deepcopy(model.q_net).float()
+        self.target = copy.deepcopy(model.q_net_target).float()
+        self.optimizer = torch.optim.Adam(self.online.parameters(), lr=config.learning_rate)
+        self.max_grad_norm = model.max_grad_norm
+        assert not self.learner.dueling, 'the floor is the plain head (no dueling)'
+        rng = np.random.default_rng(1)
+        shape = (FLOOR_BUFFER, *OBS_SHAPE)
+        self.obs = np.frombuffer(rng.bytes(int(np.prod(shape))), np.uint8).reshape(shape)
+        self.next_obs = np.frombuffer(rng.bytes(int(np.prod(shape))), np.uint8).reshape(shape)
+        self.actions = rng.integers(0, 3, FLOOR_BUFFER)
+        n = self.learner.n_steps  # n-step returns and their discounts, precomputed
+        self.returns = rng.normal(size=FLOOR_BUFFER).astype(np.float32)
+        self.discounts = np.full(FLOOR_BUFFER, config.gamma ** n, np.float32)
+        self.dones = (rng.random(FLOOR_BUFFER) < 0.01).astype(np.float32)
+        self.rng = rng
+
+    def step(self, batch: int, seconds: dict[str, float]) -> None:
+        """One gradient step, adding each phase's time to ``seconds``."""
+        clock = time.perf_counter
+        t0 = clock()
+        index = self.rng.integers(0, FLOOR_BUFFER, batch)
+        obs, next_obs = torch.from_numpy(self.obs[index]), torch.from_numpy(self.next_obs[index])
+        actions = torch.from_numpy(self.actions[index]).reshape(-1, 1)
+        returns = torch.from_numpy(self.returns[index]).reshape(-1, 1)
+        discounts = torch.from_numpy(self.discounts[index]).reshape(-1, 1)
+        dones = torch.from_numpy(self.dones[index]).reshape(-1, 1)
+        t1 = clock()
+        obs, next_obs = obs.float() / 255.0, next_obs.float() / 255.0
+        t2 = clock()
+        with torch.no_grad():
+            next_target = self.target.q_net(self.target.features_extractor(next_obs))
+            if self.learner.double_q:
+                best = self.online.q_net(self.online.features_extractor(next_obs)).argmax(
+                    dim=1, keepdim=True)
+                next_q = next_target.gather(1, best)
+            else:
+                next_q = next_target.max(dim=1, keepdim=True).values
+            target = returns + (1.0 - dones) * discounts * next_q
+        current = self.online.q_net(self.online.features_extractor(obs)).gather(1, actions)
+        loss = torch.nn.functional.smooth_l1_loss(current, target)
+        t3 = clock()
+        self.optimizer.zero_grad()
+        loss.backward()
+        t4 = clock()
+        torch.nn.utils.clip_grad_norm_(self.online.parameters(), self.max_grad_norm)
+        t5 = clock()
+        self.optimizer.step()
+        t6 = clock()
+        for phase, span in zip(FLOOR_PHASES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4,
+                                              t6 - t5), strict=True):
+            seconds[phase] += span
+
+    def time_steps(self, steps: int, batch: int, seconds: dict[str, float]) -> float:
+        """Return the wall-clock ms per step of ``steps`` floor steps."""
+        start = time.perf_counter()
+        for _ in range(steps):
+            self.step(batch, seconds)
+        return (time.perf_counter() - start) / steps * 1e3
+
+
 def gradient_steps(configs: dict[str, Any], steps: int, rounds: int) -> None:
-    """Part 1: alternate rounds of gradient steps; print medians, the ratio and the breakdown."""
+    """Parts 0 and 1: alternate the floor's and the learners' rounds; print the ratios."""
     models = {name: build(config) for name, config in configs.items()}
-    times: dict[str, list[float]] = {name: [] for name in models}
+    floor = Floor(configs['B'], models['B'])
+    floor_seconds = dict.fromkeys(FLOOR_PHASES, 0.0)
+    times: dict[str, list[float]] = {name: [] for name in [*models, 'floor']}
     for _ in range(rounds):
         for name, model in models.items():
             times[name].append(time_steps(model, steps, configs[name].batch_size))
+        times['floor'].append(floor.time_steps(steps, configs['B'].batch_size, floor_seconds))
+    floor_ms = statistics.median(times['floor'])
+    total = sum(floor_seconds.values())
+    print(f'\n0. the floor: plain PyTorch, the same step as B (batch {configs["B"].batch_size}, '
+          f'{torch.get_num_threads()} torch threads): median {floor_ms:6.2f} ms')
+    print('   ' + ', '.join(f'{phase} {floor_seconds[phase] / total:.1%}'
+                          for phase in FLOOR_PHASES))
+    ratios_b = [a / b for a, b in zip(times['B'], times['floor'], strict=True)]
+    ratios_a = [a / b for a, b in zip(times['A'], times['floor'], strict=True)]
+    print(f'   B / floor: median {statistics.median(ratios_b):.3f} (target <= 1.15); '
+          f'A / floor: median {statistics.median(ratios_a):.3f}')
     names = list(models)
     print(f'\n1. one gradient step (batch {configs[names[0]].batch_size}, '
           f'{torch.get_num_threads()} torch threads, {rounds} alternating rounds of {steps})')

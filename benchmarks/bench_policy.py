@@ -15,7 +15,11 @@
 3. **Decision latency** in the graph: the policy node driving a realtime sim at each rate,
    measured as the closed-loop evaluation measures it (wall clock: image published -> decision
    published; sim time: how many control periods late the answer acted).
-4. With ``--run``: the closed-loop evaluation's table, lockstep against real time on the same
+4. **ONNX Runtime against PyTorch** (``nav-gym-export``): the node's decision in process with
+   the exported network against the run's, interleaved on the same images, and the resident
+   memory of a policy node process running each once it has decided (an export's process
+   imports no torch).
+5. With ``--run``: the closed-loop evaluation's table, lockstep against real time on the same
    seeds (``--closed-loop-seeds``), into a temporary folder.
 
 Without ``--run`` the model is the default learner's untrained network (the same size, so the
@@ -173,6 +177,63 @@ def throughput(run: Path, images: list, seconds: float) -> float:
             context.try_shutdown()
 
 
+def onnx_against_torch(run: Path, out: Path, images: list) -> tuple[list[float], list[float]]:
+    """Per-decision seconds of the node's controller: the export's (ONNX, at ``out``), run's."""
+    from nav_gym.policy.export import export_policy
+    export = export_policy(run, out).path
+    controllers = [Controller(*load_policy(PolicyConfig(model=str(model))), image_timeout=1e9)
+                   for model in (export, run)]
+    seconds: tuple[list[float], list[float]] = ([], [])
+    for image in images[:20]:  # warm-up
+        for controller in controllers:
+            controller.on_image(image)
+            controller.decide()
+    for image in images:
+        for controller, times in zip(controllers, seconds, strict=True):
+            controller.on_image(image)
+            start = time.perf_counter()
+            controller.decide()
+            times.append(time.perf_counter() - start)
+    return seconds
+
+
+def node_memory_mb(model: Path, image: object) -> float:
+    """Resident memory (MB) of a policy node process on ``model`` once it has decided."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.signals import SignalHandlerOptions
+    from sensor_msgs.msg import Image, JointState
+
+    from nav_gym.policy.process import PolicyProcess
+    from nav_sim import interface
+    from nav_sim.ros import qos
+    namespace = f'/bench_policy_memory_{os.getpid()}'
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    node = rclpy.create_node('bench_camera', namespace=namespace, context=context)
+    camera = node.create_publisher(Image, interface.IMAGE_TOPIC, qos.OBSERVATION)
+    decided: list[float] = []
+    node.create_subscription(JointState, interface.DECISION_TOPIC,
+                             lambda m: decided.append(m.position[0]), qos.DECISIONS)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    with PolicyProcess(namespace, {'model': str(model), 'period': 0.05}) as policy:
+        try:
+            deadline = time.monotonic() + 60.0
+            while time.monotonic() < deadline and not (decided and decided[-1] >= 0):
+                if policy.failure():
+                    raise SystemExit(policy.failure())
+                camera.publish(image)
+                executor.spin_once(timeout_sec=0.05)
+            status = Path(f'/proc/{policy.process.pid}/status').read_text()
+            return next(int(line.split()[1]) for line in status.splitlines()
+                        if line.startswith('VmRSS:')) / 1024
+        finally:
+            executor.shutdown(timeout_sec=1.0)
+            node.destroy_node()
+            context.try_shutdown()
+
+
 def latency(run: Path, rate: float, seeds: tuple[int, ...]) -> dict:
     """Return a closed-loop set's entry (latency, checks, lengths) of a few episodes."""
     config = load_config(run)
@@ -196,7 +257,7 @@ def latency(run: Path, rate: float, seeds: tuple[int, ...]) -> dict:
 
 
 def main() -> None:
-    """Measure and print the four parts."""
+    """Measure and print the five parts."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--run', type=Path, help='a run directory (default: an untrained '
                         'network of the default learner; without it there is no part 4)')
@@ -230,11 +291,24 @@ def main() -> None:
         entries = [latency(run, r, seeds) for r in rates]
         print('\n'.join(f'   {line}' for line in table(LATENCY, latency_rows(entries))),
               flush=True)
+        export = Path(folder) / 'export'
+        onnx_s, torch_s = onnx_against_torch(run, export, images)
+        print(f"4. ONNX Runtime against PyTorch, the node's decision in process "
+              f'({len(onnx_s)} fresh images, interleaved):')
+        print(f'   export (ONNX Runtime, 1 thread):  {quantiles(onnx_s)}')
+        print(f'   run (PyTorch):                    {quantiles(torch_s)}')
+        ratio = np.median(onnx_s) / np.median(torch_s)
+        print(f'   ratio ONNX / PyTorch (medians):   {ratio:7.2f}')
+        memory = {name: node_memory_mb(model, images[0])
+                  for name, model in (('export', export), ('run', run))}
+        print(f"   node process memory (RSS): export {memory['export']:.0f} MB, run "
+              f"{memory['run']:.0f} MB, ratio {memory['export'] / memory['run']:.2f}",
+              flush=True)
         if args.run:
             out = Path(folder) / 'closed_loop'
             results = evaluate_closed_loop(args.run, {'heldout': parse_seeds(
                 args.closed_loop_seeds)}, rates, out, record=False)
-            print(f'4. lockstep against real time, held-out seeds {args.closed_loop_seeds}:')
+            print(f'5. lockstep against real time, held-out seeds {args.closed_loop_seeds}:')
             for lockstep, loops in pairs(results['sets']):
                 print('\n'.join(f'   {line}' for line in table(
                     COMPARISON, comparison_rows(lockstep, loops))))

@@ -86,6 +86,10 @@ def modules_under(*folders: str) -> list[str]:
     (('rclpy',), modules_under('nav_sim.core', 'nav_sim.viz', 'nav_eval.analysis')
      + ['nav_gym.env.reward']),
     (('rclpy', 'mujoco', 'torch'), modules_under('nav_eval.analysis') + ['nav_gym.env.reward']),
+    # the policy node on a robot (requirements/robot.txt): an export runs on ONNX Runtime
+    (('torch', 'stable_baselines3', 'sb3_contrib', 'mujoco', 'ray'),
+     ['nav_gym.policy_node', 'nav_gym.policy.node', 'nav_gym.policy.actors',
+      'nav_gym.policy.exported', 'nav_gym.policy.controller']),
 ])
 def test_the_layers_without_ros_import_none_of_the_forbidden_libraries(blocked, modules):
     # the probe can see the thing: a module that needs them fails under the same blocker

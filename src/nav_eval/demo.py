@@ -4,7 +4,8 @@
 
 Starts the sim node in ``realtime`` mode and the policy node (``ros2 run nav_gym policy``), each in
 its own process, as a robot would run them: nobody waits for the policy.  With ``--model RUN`` (a
-run directory or a checkpoint ``.zip``) the trained policy drives; without one, the image-only
+run directory, a checkpoint ``.zip`` or an export, ``RUN/export``, which runs on ONNX Runtime) the
+trained policy drives; without one, the image-only
 servo baseline (``policy:=servo``, :mod:`nav_gym.policy.servo`) drives the robot to the
 goal.  Prints the scenario, then each control period: the action the sim applied, the wheel speeds,
 pose, distance and event, and how late the command was.  With ``--live`` this process serves the
@@ -24,8 +25,9 @@ import numpy as np
 from nav_eval.evaluation.closed_loop import ClosedLoop, LoopSettings, run_episode
 from nav_gym.cli import run_command, strip_ros_args
 from nav_gym.policy.actors import model_file, run_of
+from nav_gym.policy.exported import is_export, read_export
 from nav_gym.training.config import TrainConfig
-from nav_gym.training.run_dir import load_config
+from nav_gym.training.run_dir import load_config, run_settings
 from nav_gym.training.timing import quiet_learner_threads
 from nav_sim.core.config import HELDOUT, TRAIN
 from nav_sim.core.scenarios import DEMO_SEED
@@ -71,6 +73,8 @@ def demo_config(model: str | None) -> TrainConfig:
     """Return the settings the demo's sim runs with: the model's run's, or the defaults."""
     if model is None:
         return TrainConfig()
+    if is_export(model):  # an export carries its run's settings
+        return TrainConfig(**run_settings(read_export(model).config))
     run = run_of(model_file(model))
     return load_config(run) if run is not None else TrainConfig()
 
@@ -99,8 +103,9 @@ def run(model: str | None, seed: int, split: str, rate: float, live_port: int) -
             if live is not None:
                 closed.graph.forward = live.forward
             observers = [printer] + ([live] if live is not None else [])
-            result, trace, _, latency = run_episode(closed.graph, seed, split,
-                                                    config.env_config(), loop, observers)
+            with closed.dead_named():
+                result, trace, _, latency = run_episode(closed.graph, seed, split,
+                                                        config.env_config(), loop, observers)
     finally:
         if live is not None:
             live.close()
@@ -115,8 +120,8 @@ def run(model: str | None, seed: int, split: str, rate: float, live_port: int) -
 def main(argv: list[str] | None = None) -> None:
     """Run the ``visnav-demo`` command (``make demo``)."""
     parser = argparse.ArgumentParser(prog=PROG, description=__doc__.splitlines()[0])
-    parser.add_argument('--model', help='a run directory or checkpoint .zip (default: the '
-                        'image-only servo baseline)')
+    parser.add_argument('--model', help='a run directory, a checkpoint .zip or an export '
+                        '(RUN/export, on ONNX Runtime) (default: the image-only servo baseline)')
     parser.add_argument('--seed', type=int, default=DEMO_SEED)
     parser.add_argument('--split', default=TRAIN, choices=(TRAIN, HELDOUT))
     parser.add_argument('--rate', type=float, default=1.0,
@@ -128,8 +133,8 @@ def main(argv: list[str] | None = None) -> None:
     quiet_learner_threads()
 
     def body() -> int:
-        if args.model:
-            model_file(args.model)  # a clear error before anything starts
+        if args.model:  # a clear error before anything starts
+            read_export(args.model) if is_export(args.model) else model_file(args.model)
         return run(args.model, args.seed, args.split, args.rate, args.live)
 
     run_command(PROG, body)

@@ -39,6 +39,8 @@ from nav_eval.seeds import (
     CLOSED_LOOP_HELDOUT,
     WORKSHOP_HELDOUT,
     WORKSHOP_TRAIN,
+    add_many_episodes_argument,
+    check_episodes,
     parse_seeds,
     seed_text,
 )
@@ -102,6 +104,7 @@ def command_parser() -> argparse.ArgumentParser:
     parser.add_argument('--realtime-rate', type=parse_rates, default=DEFAULT_RATES,
                         metavar='R[,R...]', help='with --closed-loop: sim seconds per wall-clock '
                         'second, one closed-loop set per rate (default 1,4)')
+    add_many_episodes_argument(parser)
     add_live_argument(parser)
     return parser
 
@@ -117,6 +120,7 @@ def lockstep(args: argparse.Namespace) -> int:
                      parse_seeds(args.train_seeds or seed_text(WORKSHOP_TRAIN)),
                      parse_seeds(args.heldout_seeds or seed_text(WORKSHOP_HELDOUT)),
                      args.checkpoint, args.early_checkpoint)
+    check_episodes(sum(len(s.seeds) for s in sets), args.many_episodes)
     if writes_eval and any(s.policy == 'explore' for s in sets):
         raise EvaluationError('the explore sets are a diagnosis, not the evaluation: write '
                               'them elsewhere with --out (e.g. --out RUN_DIR/eval_explore)')
@@ -157,6 +161,9 @@ def closed_loop(args: argparse.Namespace) -> int:
     seeds = {HELDOUT: parse_seeds(args.heldout_seeds or seed_text(CLOSED_LOOP_HELDOUT))}
     if args.train_seeds:
         seeds = {TRAIN: parse_seeds(args.train_seeds), **seeds}
+    # each seed: once in lockstep, once per rate
+    check_episodes(sum(map(len, seeds.values())) * (1 + len(args.realtime_rate)),
+                   args.many_episodes)
     start = time.perf_counter()
     out = args.out or args.run_dir / CLOSED_LOOP
     results = evaluate_closed_loop(args.run_dir, seeds, args.realtime_rate, out,

@@ -46,6 +46,9 @@ def parse_args(argv: Sequence[str]) -> argparse.Namespace:
                         help="namespace of the sim node, e.g. /robot1 (default: '/')")
     parser.add_argument('--duration', type=positive_seconds, default=None, metavar='SECONDS',
                         help='stop after this many wall-clock seconds (default: until Ctrl-C)')
+    parser.add_argument('--cmd-vel-stamped', action='store_true',
+                        help='record cmd_vel as geometry_msgs/TwistStamped (a sim started with '
+                        'cmd_vel_stamped:=true)')
     return parser.parse_args(strip_ros_args(argv))
 
 
@@ -55,7 +58,7 @@ def main(args: list[str] | None = None) -> None:
     with stop_on_signals(StopRequest()) as stop:
         try:
             recorder = BagRecorder(options.output, options.namespace, node_name='nav_eval_record',
-                                   topics=WITH_POLICY)
+                                   topics=WITH_POLICY, cmd_vel_stamped=options.cmd_vel_stamped)
         except RecordingError as exc:
             raise SystemExit(f'{PROG}: {exc}') from None
         print(f'{PROG}: recording {recorder.namespace or "/"} into {options.output} '

@@ -18,7 +18,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from nav_eval.seeds import CURVE, HELDOUT_BANK, TRAIN_BANK, seed_text
+from nav_eval.seeds import CURVE, HELDOUT_BANK, TRAIN_BANK, add_many_episodes_argument, seed_text
 from nav_eval.sweeps.cluster import check_cluster
 from nav_eval.sweeps.runner import aggregate, export, run_sweep
 from nav_eval.sweeps.spec import load_spec, spec_from_args
@@ -50,6 +50,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help='held-out scenarios of the final evaluation')
     parser.add_argument('--curve-seeds', default=seed_text(CURVE), help="held-out scenarios per "
                         "checkpoint for the sample-efficiency curve ('' = none)")
+    add_many_episodes_argument(parser)
     parser.add_argument('--no-baselines', action='store_true',
                         help='skip the random policy and servo on both banks')
     parser.add_argument('--record', action='store_true', help='write MCAP bags of the final '

@@ -1,20 +1,24 @@
 """Command-line helpers of every visnav command (nav_gym's and nav_eval's): options, errors.
 
 Each command strips the ``--ros-args`` blocks ``ros2 run`` passes, and runs its body through
-:func:`run_command`, which prints any :class:`nav_sim.errors.VisnavError` as one line.
+:func:`run_command`, the last line of defence: any :class:`nav_sim.errors.VisnavError` is one
+line per problem, and so is an unexpected exception from a library (its traceback shows with
+``VISNAV_DEBUG=1``).
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import os
 import signal
 import sys
+import traceback
 from collections.abc import Callable, Sequence
 from typing import Any
 
 from nav_gym.env.config import SIM_MODES, EnvConfig, parse_mapping
-from nav_sim.errors import VisnavError
+from nav_sim.errors import VisnavError, describe_exception
 
 #: the env settings that say how to reach the sim, as options of every command that does
 ENV_OPTIONS = ('namespace', 'sim', 'sim_timeout')
@@ -57,11 +61,21 @@ def strip_ros_args(argv: Sequence[str] | None) -> list[str]:
     return out
 
 
+#: set to 1 to see the traceback behind a command's one-line error
+DEBUG_ENV = 'VISNAV_DEBUG'
+
+
 def run_command(name: str, body: Callable[[], int]) -> None:
-    """Run a command body: readable one-line errors, exit 130 on Ctrl-C, never a traceback."""
+    """Run a command body: readable one-line errors, exit 130 on Ctrl-C, never a traceback.
+
+    Unless ``VISNAV_DEBUG=1``, which prints the traceback of an error before its line.
+    """
+    debug = os.environ.get(DEBUG_ENV, '') not in ('', '0')
     try:
         code = body()
     except VisnavError as exc:  # one line per problem (a world's violations: one each)
+        if debug:
+            traceback.print_exc()
         for line in str(exc).splitlines() or ['']:
             print(f'{name}: error: {line}', file=sys.stderr)
         code = 1
@@ -69,7 +83,15 @@ def run_command(name: str, body: Callable[[], int]) -> None:
         print(f'{name}: interrupted', file=sys.stderr)
         code = 130
     except OSError as exc:  # a file the command needs cannot be read or written
+        if debug:
+            traceback.print_exc()
         print(f'{name}: error: {exc}', file=sys.stderr)
+        code = 1
+    except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, not a trace
+        if debug:
+            traceback.print_exc()
+        print(f'{name}: error: unexpected {describe_exception(exc)} (a bug: please report it '
+              f'with the traceback that {DEBUG_ENV}=1 shows)', file=sys.stderr)
         code = 1
     sys.exit(code)
 

@@ -7,13 +7,17 @@ or a bad model are one line (exit code 2 or 1).
 
 from __future__ import annotations
 
+import os
+import traceback
+
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.signals import SignalHandlerOptions
 
+from nav_gym.cli import DEBUG_ENV
 from nav_gym.errors import PolicyModelError
 from nav_gym.policy.node import SIGNAL_CHECK_S, PolicyNode
-from nav_sim.errors import ConfigError
+from nav_sim.errors import ConfigError, describe_exception
 from nav_sim.ros.stop_request import StopRequest, stop_on_signals
 
 
@@ -37,6 +41,12 @@ def main(args: list[str] | None = None) -> None:
             raise SystemExit(2) from None
         except PolicyModelError as exc:
             print(f'policy_node: {exc}')
+            raise SystemExit(1) from None
+        except Exception as exc:  # noqa: BLE001 - the last line of defence: one line
+            if os.environ.get(DEBUG_ENV, '') not in ('', '0'):
+                traceback.print_exc()
+            print(f'policy_node: unexpected {describe_exception(exc)} (the robot was sent a zero '
+                  f'command; {DEBUG_ENV}=1 shows the traceback)')
             raise SystemExit(1) from None
         finally:
             if node is not None:

@@ -42,8 +42,18 @@ class SimConflictError(NavSimError, RuntimeError):
     """
 
 
+class SimInUseError(SimConflictError):
+    """Another process controls the sim (resets and steps it): one controlling client at a time."""
+
+
 class WorldError(NavSimError, ValueError):
     """A world file cannot be read, or breaks the world contract (docs/worlds.md).
 
     The message has one line per problem, each naming the file and the element.
     """
+
+
+def describe_exception(exc: BaseException) -> str:
+    """Name an exception and its message's first line: ``ValueError: bad value``."""
+    lines = str(exc).strip().splitlines()
+    return f'{type(exc).__name__}: {lines[0]}' if lines else type(exc).__name__

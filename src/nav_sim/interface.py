@@ -16,8 +16,14 @@ CAMERA_INFO_TOPIC = 'camera/camera_info'  # sensor_msgs/CameraInfo, same stamp
 ODOM_TOPIC = 'odom'  # nav_msgs/Odometry, same stamp (privileged: evaluation only)
 EVENT_TOPIC = 'episode_event'  # diagnostic_msgs/DiagnosticArray (see nav_sim.ros.messages)
 GOAL_TOPIC = 'goal_pose'  # geometry_msgs/PoseStamped, latched, at each reset
-CMD_VEL_TOPIC = 'cmd_vel'  # geometry_msgs/Twist: one control period per message
+CMD_VEL_TOPIC = 'cmd_vel'  # geometry_msgs/Twist (or TwistStamped): one period per message
 CLOCK_TOPIC = '/clock'  # rosgraph_msgs/Clock, with publish_clock (global: ROS's sim time)
+
+#: std_msgs/String, latched: a controlling client's claim, JSON {node, host, pid, since_ns}
+CLAIM_TOPIC = 'sim_claim'
+#: std_msgs/String, latched, from the sim: the claim that holds it ({} while none; see
+#: nav_sim.ros.claim)
+CONTROLLER_TOPIC = 'sim_controller'
 
 RESET_SERVICE = 'reset'  # std_srvs/Trigger: a new episode (seed and split from parameters)
 STOP_SERVICE = 'stop'  # std_srvs/Trigger: stop the robot
@@ -41,6 +47,17 @@ CAMERA_INFO_TYPE = 'sensor_msgs/msg/CameraInfo'       # CAMERA_INFO_TOPIC
 ODOM_TYPE = 'nav_msgs/msg/Odometry'                   # ODOM_TOPIC
 EVENT_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'    # EVENT_TOPIC (and /diagnostics)
 GOAL_TYPE = 'geometry_msgs/msg/PoseStamped'           # GOAL_TOPIC
-CMD_VEL_TYPE = 'geometry_msgs/msg/Twist'              # CMD_VEL_TOPIC
+CMD_VEL_TYPE = 'geometry_msgs/msg/Twist'              # CMD_VEL_TOPIC (the default)
+CMD_VEL_STAMPED_TYPE = 'geometry_msgs/msg/TwistStamped'  # CMD_VEL_TOPIC with cmd_vel_stamped
 CLOCK_TYPE = 'rosgraph_msgs/msg/Clock'                # CLOCK_TOPIC
 DECISION_TYPE = 'sensor_msgs/msg/JointState'          # DECISION_TOPIC: named numbers, stamped
+CLAIM_TYPE = 'std_msgs/msg/String'                    # CLAIM_TOPIC, CONTROLLER_TOPIC
+
+
+def cmd_vel_type(stamped: bool) -> str:
+    """Return the type of ``cmd_vel`` with the ``cmd_vel_stamped`` setting ``stamped``.
+
+    ``Twist`` is the workshop's (the default); ``TwistStamped`` is what ROS 2 Jazzy's
+    ``diff_drive_controller`` takes.  The sim, its clients and the policy node share the setting.
+    """
+    return CMD_VEL_STAMPED_TYPE if stamped else CMD_VEL_TYPE

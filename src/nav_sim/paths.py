@@ -3,12 +3,28 @@
 from __future__ import annotations
 
 import os
+import re
 import sys
 from pathlib import Path
 
 from nav_sim.errors import WorldNotFoundError
 
 PACKAGE = 'nav_sim'
+#: a user-given name that becomes one path component (a run's, a sweep's)
+PLAIN_NAME = re.compile(r'[A-Za-z0-9_][A-Za-z0-9._-]{0,127}')
+
+
+def plain_name_problem(what: str, name: str) -> str | None:
+    """Say why ``name`` cannot be one plain path component (None if it can).
+
+    Run and sweep names become directories under ``--runs-dir`` or the sweep storage: a name
+    with a separator, ``..`` or a leading dot would land elsewhere or hide.  Paths a user gives
+    as paths (``--runs-dir``, ``--out``) are not names.
+    """
+    if PLAIN_NAME.fullmatch(name):
+        return None
+    return (f"{what} must be one plain path component: 1 to 128 letters, digits, '_', '.' "
+            f"or '-', not starting with '.' or '-', got {name!r}")
 
 
 def ament_prefixes() -> list[Path]:

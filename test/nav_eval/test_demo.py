@@ -6,7 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from helpers import free_port, wait_until
+from helpers import free_port, make_tiny_run, wait_until
 from nav_sim.viz import topics as live_topics
 from nav_sim.viz.client import LiveClient
 
@@ -29,7 +29,17 @@ def test_a_missing_model_is_one_line():
                             timeout=120)
     assert result.returncode == 1
     assert result.stderr.strip() == ('visnav-demo: error: model /no/such/run not found: give a '
-                                     'run directory or a checkpoint .zip')
+                                     'run directory, a checkpoint .zip or an export directory')
+
+
+def test_an_export_drives_the_demo_on_onnx_runtime(tmp_path, spaces_only):
+    run = make_tiny_run(tmp_path, spaces_only)
+    from nav_gym.policy.export import export_policy
+    export = export_policy(run).path
+    result = subprocess.run([DEMO, '--model', str(export), '--rate', '8'], capture_output=True,
+                            text=True, timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert f'the model {export}' in result.stdout and 'episode over: ' in result.stdout
 
 
 def test_the_live_view_shows_the_policys_decisions():

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -200,6 +201,29 @@ def test_evaluate_command_reports_errors_without_traceback(tmp_path, run_dir):
     binary.mkdir()
     (binary / 'config.yaml').write_bytes(bytes(range(256)) * 4)
     assert 'not a UTF-8 text file' in one_line_error(evaluate_command(str(binary)))
+
+
+def test_seed_ranges_are_checked_before_they_are_built():
+    start = time.perf_counter()
+    with pytest.raises(EvaluationError, match=r'names 1000000000001 seeds, more than the '
+                       r'100000 one list may name'):
+        seeds.parse_seeds('0-1000000000000')
+    assert time.perf_counter() - start < 1.0  # no list of a trillion seeds was built first
+    with pytest.raises(EvaluationError, match='seeds are 0 to 2\\*\\*63 - 1'):
+        seeds.parse_seeds(f'1,{2**63}')
+    assert len(seeds.parse_seeds('0-99999')) == seeds.MAX_SEEDS
+
+
+def test_a_large_evaluation_needs_the_flag_and_nothing_starts_without_it(tmp_path, run_dir):
+    out = tmp_path / 'out'
+    line = one_line_error(evaluate_command(str(run_dir), '--heldout-seeds', '1-100000',
+                                           '--sets', 'dqn_heldout', '--out', str(out)))
+    assert line == ('nav-eval-evaluate: error: 100000 episodes is more than 5000: add '
+                    '--many-episodes to run them all')
+    line = one_line_error(evaluate_command(str(run_dir), '--closed-loop', '--heldout-seeds',
+                                           '1-2000', '--out', str(out)))
+    assert '6000 episodes is more than 5000' in line  # lockstep + two rates
+    assert not out.exists()
 
 
 def test_a_reversed_seed_range_is_rejected():

@@ -21,7 +21,9 @@ decision-latency distribution and the checks of the reconstruction
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -57,6 +59,7 @@ from nav_gym.training.run_dir import BAGS, CLOSED_LOOP, FINAL_MODEL
 from nav_sim import interface
 from nav_sim.core.config import HELDOUT, TRAIN, SimConfig
 from nav_sim.core.events import TERMINAL_EVENTS
+from nav_sim.errors import VisnavError, describe_exception
 from nav_sim.ros.process import SimProcess
 
 DEFAULT_RATES = (1.0, 4.0)
@@ -222,6 +225,8 @@ class ClosedLoop:
         self.namespace = f'/visnav_closed_loop_{os.getpid()}_{loop.rate:g}'.replace('.', '_')
         params = {**config.sim_params, 'mode': 'realtime', 'realtime_rate': loop.rate,
                   'publish_clock': True, 'cmd_vel_timeout': loop.timeout, **(sim_params or {})}
+        if config.cmd_vel_stamped:  # the sim and the policy node take the run's setting
+            params['cmd_vel_stamped'] = policy['cmd_vel_stamped'] = True
         self.sim = SimProcess(self.namespace, params=params)
         self.policy: PolicyProcess | None = None
         self.graph: RealtimeGraph | None = None
@@ -238,6 +243,22 @@ class ClosedLoop:
     def failure(self) -> str | None:
         """Return why the sim or the policy node exited, or None while both run."""
         return self.sim.failure() or (self.policy.failure() if self.policy else None)
+
+    @contextlib.contextmanager
+    def dead_named(self) -> Iterator[None]:
+        """Say that a process of the loop exited, when it did, instead of a time-out.
+
+        A killed sim shows as silence (no period, a service that does not answer); within this
+        block, an error while the sim or the policy node has exited names the process, its exit
+        code or signal.
+        """
+        try:
+            yield
+        except VisnavError as exc:
+            died = self.failure()
+            if died is None:
+                raise
+            raise EvaluationError(f'{died} (while {describe_exception(exc)})') from exc
 
     def close(self) -> None:
         """Stop the graph, the policy node (its zero Twist) and the sim."""
@@ -278,15 +299,16 @@ def evaluate_rate(run_dir: Path, config: TrainConfig, eval_set: EvalSet, rate: f
                 out / BAGS / eval_set.name, loop_graph.namespace,
                 lambda: graph.reset(0, TRAIN, loop.wait)[1].tick.stamp_ns,
                 lambda bag: bag.wait_for(0, loop.wait, (interface.DECISION_TOPIC,)),
-                topics=WITH_POLICY)
+                topics=WITH_POLICY, cmd_vel_stamped=config.cmd_vel_stamped)
             observers.append(BagSceneWriter(recorder, config.sim_params))
         meta = {'set': eval_set.name, 'policy': eval_set.policy,
                 'checkpoint': eval_set.checkpoint, 'realtime_rate': rate}
         results, latencies = [], ImageLatencies()
         checks: dict[str, int] = {}
         for seed in eval_set.seeds:
-            result, trace, frames, latency = run_episode(graph, seed, eval_set.split, env, loop,
-                                                         observers)
+            with loop_graph.dead_named():
+                result, trace, frames, latency = run_episode(graph, seed, eval_set.split, env,
+                                                             loop, observers)
             results.append(result)
             latencies.sim += latency.sim
             latencies.wall += latency.wall

@@ -221,7 +221,8 @@ def _open_recorder(path: Path, env: NavigationEnv, timeout: float = 10.0) -> Any
     # recorder's subscription (the sim's subscription is the other one)
     commands = env.client.pub_cmd
     return open_recorder(path, env.namespace, lambda: env.client.reset(0, TRAIN)[0].stamp_ns,
-                         lambda _: commands.get_subscription_count() >= 2, timeout)
+                         lambda _: commands.get_subscription_count() >= 2, timeout,
+                         cmd_vel_stamped=env.config.cmd_vel_stamped)
 
 
 def env_for_run(config: TrainConfig, record: bool, sim: str = 'embedded') -> NavigationEnv:

@@ -8,7 +8,7 @@ drives it, and writes the CDR bytes unchanged, each under its fully resolved top
     <ns>/odom                 nav_msgs/msg/Odometry
     <ns>/goal_pose            geometry_msgs/msg/PoseStamped (transient local)
     <ns>/episode_event        diagnostic_msgs/msg/DiagnosticArray
-    <ns>/cmd_vel              geometry_msgs/msg/Twist
+    <ns>/cmd_vel              geometry_msgs/msg/Twist (TwistStamped with cmd_vel_stamped)
     /clock                    rosgraph_msgs/msg/Clock
     /visnav/episode           std_msgs/msg/String (only written by :meth:`BagRecorder.annotate`)
 
@@ -67,7 +67,7 @@ from nav_eval.recording.bags import (
     cdr_stamp_ns,
 )
 from nav_eval.recording.timestamps import Placed, StampPolicy
-from nav_eval.recording.topics import TOPICS, RecordedTopic, bag_qos
+from nav_eval.recording.topics import TOPICS, RecordedTopic, bag_qos, with_cmd_vel
 from nav_sim import interface
 
 _log = logging.getLogger(__name__)
@@ -96,13 +96,15 @@ class BagRecorder:
     def __init__(self, path: str | Path, namespace: str = '', *,
                  node_name: str = 'visnav_recorder', queue_depth: int = QUEUE_DEPTH,
                  paused: bool = False, root_names: bool = False,
-                 topics: tuple[RecordedTopic, ...] = TOPICS) -> None:
+                 topics: tuple[RecordedTopic, ...] = TOPICS,
+                 cmd_vel_stamped: bool = False) -> None:
         """Create the bag at ``path`` (which must not exist) and start recording ``topics``.
 
         ``paused`` notes messages without writing them until :meth:`start`; ``root_names``
-        writes the graph topics under root-namespace names instead of their resolved ones.
+        writes the graph topics under root-namespace names instead of their resolved ones;
+        ``cmd_vel_stamped`` records ``cmd_vel`` as TwistStamped (the sim's setting).
         """
-        self.topics = topics
+        self.topics = with_cmd_vel(topics, cmd_vel_stamped)
         self.path = Path(path)
         # root_names: write the graph topics as if the sim ran in the root namespace
         # (camera/image_raw -> /camera/image_raw), the names the live view and the shipped

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped, Twist
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.qos import QoSProfile
 from rosbags.interfaces import (
@@ -53,6 +54,20 @@ TOPICS = (
 #: the sim's topics and the policy node's decisions
 WITH_POLICY = (*TOPICS, RecordedTopic(interface.DECISION_TOPIC, interface.DECISION_TYPE,
                                       JointState, qos.DECISIONS, True))
+
+
+def with_cmd_vel(topics: tuple[RecordedTopic, ...], stamped: bool) -> tuple[RecordedTopic, ...]:
+    """Return ``topics`` recording ``cmd_vel`` as TwistStamped if ``stamped`` (else as given).
+
+    A subscription hears only publishers of its own type, so the recorder takes the setting
+    the sim and its clients share (``cmd_vel_stamped``).  A TwistStamped's stamp is the
+    sender's clock, not the sim's, so the bag still places it at the sim time so far.
+    """
+    if not stamped:
+        return topics
+    return tuple(dataclasses.replace(t, msgtype=interface.CMD_VEL_STAMPED_TYPE,
+                                     msg_class=TwistStamped)
+                 if t.name == interface.CMD_VEL_TOPIC else t for t in topics)
 
 
 def bag_qos(profile: QoSProfile) -> Qos:

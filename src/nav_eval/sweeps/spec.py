@@ -21,11 +21,12 @@ from pathlib import Path
 from typing import Any
 
 from nav_eval.errors import EvaluationError, SweepError
-from nav_eval.seeds import CURVE, HELDOUT_BANK, TRAIN_BANK, parse_seeds
+from nav_eval.seeds import CURVE, HELDOUT_BANK, TRAIN_BANK, check_episodes, parse_seeds
 from nav_gym.errors import NavGymError
 from nav_gym.training.config import FIELDS, build
 from nav_sim.core.world import load_arena
 from nav_sim.errors import NavSimError
+from nav_sim.paths import plain_name_problem
 from nav_sim.ros.process import typed_params
 
 SWEEP_FILE = 'sweep.json'
@@ -202,6 +203,9 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     if 'seed' in fixed or 'seed' in grid:
         raise SweepError('the training seed is the sweep axis: use --seeds, not seed=')
     name = args.name or datetime.now().strftime('sweep_%Y%m%d_%H%M%S')
+    problem = plain_name_problem('--name', name)
+    if problem:
+        raise SweepError(problem)
     sweep_dir = (Path(args.storage) / name).resolve()
     if (sweep_dir / SWEEP_FILE).exists():
         raise SweepError(f'{sweep_dir} already holds a sweep: continue it with --resume '
@@ -210,6 +214,13 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
         seeds = {k: list(parse_seeds(getattr(args, k))) for k in
                  ('seeds', 'train_seeds', 'heldout_seeds')}
         curve = list(parse_seeds(args.curve_seeds)) if args.curve_seeds else []
+        seed_bounds = FIELDS['seed'].metadata['bounds']
+        for seed in seeds['seeds']:
+            if not seed_bounds.allows(seed):
+                raise SweepError(f'training seed must be {seed_bounds.describe()}, got {seed}')
+        # a trial's final evaluation: its training and held-out seeds
+        check_episodes(len(seeds['train_seeds']) + len(seeds['heldout_seeds']),
+                       args.many_episodes)
     except EvaluationError as exc:
         raise SweepError(str(exc)) from None
     if args.cpus_per_trial < 1 or args.gpus_per_trial < 0:

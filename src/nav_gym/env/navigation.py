@@ -82,7 +82,8 @@ class NavigationEnv(gym.Env):
         if cfg.sim == 'embedded' and not namespace:
             namespace = f'/visnav_env_{os.getpid()}_{next(_instances)}'
         client = SimClient(namespace, timeout=cfg.sim_timeout,
-                           node_name=f'visnav_env_{os.getpid()}_{next(_instances)}')
+                           node_name=f'visnav_env_{os.getpid()}_{next(_instances)}',
+                           cmd_vel_stamped=cfg.cmd_vel_stamped)
         try:
             if cfg.sim == 'attach':
                 client.wait_for_sim(cfg.sim_timeout)
@@ -93,8 +94,11 @@ class NavigationEnv(gym.Env):
                     client.close()
                     namespace = f'/visnav_env_{os.getpid()}_{next(_instances)}'
                     client = SimClient(namespace, timeout=cfg.sim_timeout,
-                                       node_name=f'visnav_env_{os.getpid()}')
+                                       node_name=f'visnav_env_{os.getpid()}',
+                                       cmd_vel_stamped=cfg.cmd_vel_stamped)
                 params = {'publish_clock': False, **cfg.sim_params}
+                if cfg.cmd_vel_stamped:  # the default stays unsaid: the workshop's Twist
+                    params['cmd_vel_stamped'] = True
                 load_arena(params)  # a bad world or setting: its one-line error, raised here
                 # never a second sim in a namespace: look for one as long as 'auto' does
                 looked = cfg.sim == 'auto' or not cfg.namespace  # or a fresh namespace

@@ -4,7 +4,8 @@
 the policy node act through: an action per observation, and ``begin_episode``, the one place
 where an actor's state between decisions starts afresh.  :func:`load_policy` loads what the
 policy node runs: ``model`` is a run directory (its ``final_model.zip``) or a checkpoint
-``.zip``; the run's ``config.yaml`` (of the directory, or of the run the checkpoint lies in)
+``.zip`` or an export directory (``RUN/export``, :mod:`nav_gym.policy.exported`, acted on ONNX
+Runtime); the run's ``config.yaml`` (of the directory, or of the run the checkpoint lies in)
 gives each action's velocities (:func:`nav_gym.env.actions.action_twists`) and the control
 period.  A ``.zip`` outside any run directory acts with the training defaults
 (:class:`nav_gym.training.config.TrainConfig`: forward 0.12 m/s, turns 0.03 m/s at +-0.75
@@ -24,6 +25,7 @@ import numpy as np
 from nav_gym.env.actions import action_twists
 from nav_gym.errors import PolicyModelError, TrainConfigError
 from nav_gym.policy.config import PolicyConfig
+from nav_gym.policy.exported import META_FILE, OnnxActor, is_export, read_export
 from nav_gym.policy.servo import servo_act, servo_band
 from nav_gym.training.config import TrainConfig
 from nav_gym.training.run_dir import FINAL_MODEL, is_run_dir, load_config
@@ -148,8 +150,8 @@ def model_file(model: str | Path) -> Path:
                                    'training, or give a checkpoint .zip')
         return final
     if not path.is_file():
-        raise PolicyModelError(f'model {path} not found: give a run directory or a checkpoint '
-                               '.zip')
+        raise PolicyModelError(f'model {path} not found: give a run directory, a checkpoint '
+                               '.zip or an export directory')
     return path
 
 
@@ -162,7 +164,18 @@ def run_of(checkpoint: Path) -> Path | None:
 
 
 def load_policy(config: PolicyConfig) -> tuple[Actor, Acting]:
-    """Return the actor and how it acts; raise PolicyModelError saying what is wrong."""
+    """Return the actor and how it acts; raise PolicyModelError saying what is wrong.
+
+    An export directory (``nav-gym-export``) acts on ONNX Runtime, without torch.
+    """
+    if config.model and is_export(config.model):
+        spec = read_export(config.model)
+        acting = Acting(spec.twists, spec.control_period, spec.camera_hfov_deg,
+                        f'{spec.path}/{META_FILE}')
+        if config.policy == 'servo':
+            return ServoActor.for_actions(spec.twists[0][1], acting.control_period,
+                                          acting.hfov_deg), acting
+        return OnnxActor(spec), acting
     checkpoint = model_file(config.model) if config.model else None
     run = run_of(checkpoint) if checkpoint is not None else None
     try:

@@ -1,11 +1,14 @@
 """``ros2 run nav_gym policy``: a trained policy driving any ROS 2 camera (a thin adapter).
 
 Subscribes ``camera/image_raw`` (sensor-data QoS: best effort, the newest image) and, on its own
-wall-clock timer every ``period`` seconds, publishes ``cmd_vel`` (geometry_msgs/Twist) with the
+wall-clock timer every ``period`` seconds, publishes ``cmd_vel`` (geometry_msgs/Twist, or
+TwistStamped with ``cmd_vel_stamped``, stamped when it is published on the node's clock) with the
 velocities of the action the policy takes on the newest image; nobody waits for it, and it
-waits for nobody.  The model, the observation and the action come from :mod:`nav_gym.policy`
-(no ROS there).  Without an image newer than ``image_timeout`` it publishes zero velocity; on
-SIGINT or SIGTERM it publishes a zero Twist before it exits.
+waits for nobody.  With ``cmd_vel_rate`` it repeats the current command between decisions (a
+ros2_control ``diff_drive_controller`` stops after its ``cmd_vel_timeout``, 0.5 s by default).
+The model, the observation and the action come from :mod:`nav_gym.policy` (no ROS there).
+Without an image newer than ``image_timeout`` it publishes zero velocity; on SIGINT or SIGTERM
+it publishes a zero command before it exits.
 
 Also publishes (relative names) ``policy/decision`` (sensor_msgs/JointState, stamped with the
 decided image's stamp; names and positions as :data:`nav_sim.interface.DECISION_FIELDS`: action,
@@ -22,7 +25,6 @@ import time
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import Twist
 from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
@@ -36,10 +38,10 @@ from nav_sim import interface
 from nav_sim.core.step_timing import StepTiming
 from nav_sim.interface import DECISION_FIELDS
 from nav_sim.ros import messages as ros_msgs
-from nav_sim.ros import qos
+from nav_sim.ros import qos, sim_graph
 from nav_sim.ros.node_params import declare_settings, warn_unknown_overrides, watch_settings
 
-DYNAMIC = ('period', 'image_timeout')
+DYNAMIC = ('period', 'image_timeout', 'cmd_vel_rate')
 WARN_PERIOD_S = 5.0
 STOP_ACK_S = 1.0    # how long the final zero Twist may take to be acknowledged
 SIGNAL_CHECK_S = 0.1  # how often the spin loop looks for a stop signal
@@ -59,7 +61,11 @@ class PolicyNode(Node):
         self.controller = Controller(actor, self.acting, self._image_timeout(self.settings))
         watch_settings(self, PARAMETER_TYPES, lambda: self.settings,
                        lambda values: PolicyConfig(**values), self._apply_settings, DYNAMIC)
-        self.pub_cmd = self.create_publisher(Twist, interface.CMD_VEL_TOPIC, qos.CONTROL)
+        self.pub_cmd = self.create_publisher(
+            ros_msgs.cmd_vel_class(self.settings.cmd_vel_stamped), interface.CMD_VEL_TOPIC,
+            qos.CONTROL)
+        self._command = (0.0, 0.0)  # the current command's (linear, angular)
+        self._repeat_timer = None
         self.pub_decision = self.create_publisher(JointState, interface.DECISION_TOPIC,
                                                   qos.DECISIONS)
         self.pub_observation = self.create_publisher(
@@ -70,17 +76,20 @@ class PolicyNode(Node):
         # and a timer on it would fire at each period's start, before that period's image
         self._timer = self.create_timer(self._period(self.settings), self._on_timer,
                                         clock=Clock(clock_type=ClockType.STEADY_TIME))
+        self._set_repeat_rate(self.settings.cmd_vel_rate)
         self._timing = StepTiming(DECISION_PHASES, unit='decision')
         self._stops = 0
         self._state = ''
         self._errors_logged: set[str] = set()
+        self._type_checked = False
         self.get_logger().info(
             f'{READY_MESSAGE} policy={self.settings.policy} model='
             f'{self.settings.model or "none"}, period={self._period(self.settings):.3f} s, '
             f'image_timeout={self.controller.image_timeout:.3f} s, actions (linear m/s, angular '
             f'rad/s) {self.acting.twists} from {self.acting.source}; subscribed to '
             f'{self.resolve_topic_name(interface.IMAGE_TOPIC)}, publishing '
-            f'{self.resolve_topic_name(interface.CMD_VEL_TOPIC)}')
+            f'{self.resolve_topic_name(interface.CMD_VEL_TOPIC)} '
+            f'({interface.cmd_vel_type(self.settings.cmd_vel_stamped)})')
 
     # --- parameters -----------------------------------------------------------------------
     def _period(self, settings: PolicyConfig) -> float:
@@ -94,6 +103,17 @@ class PolicyNode(Node):
         self.controller.image_timeout = self._image_timeout(self.settings)
         self._timer.timer_period_ns = round(self._period(self.settings) * 1e9)
         self._timer.reset()
+        if 'cmd_vel_rate' in changes:
+            self._set_repeat_rate(self.settings.cmd_vel_rate)
+
+    def _set_repeat_rate(self, rate: float) -> None:
+        """Repeat the current command at ``rate`` Hz between decisions (0: do not)."""
+        if self._repeat_timer is not None:
+            self.destroy_timer(self._repeat_timer)
+            self._repeat_timer = None
+        if rate > 0:
+            self._repeat_timer = self.create_timer(
+                1.0 / rate, self._publish_command, clock=Clock(clock_type=ClockType.STEADY_TIME))
 
     # --- acting ---------------------------------------------------------------------------
     def _on_image(self, msg: Image) -> None:
@@ -102,14 +122,32 @@ class PolicyNode(Node):
     def _on_timer(self) -> None:
         command = self.controller.decide()
         start = time.perf_counter()
-        self.pub_cmd.publish(_twist(command.linear, command.angular))
+        self._command = (command.linear, command.angular)
+        self._publish_command()
         self.pub_decision.publish(self._decision_msg(command))
         if command.observation is not None and self.pub_observation.get_subscription_count():
             self.pub_observation.publish(ros_msgs.image_msg(
                 command.observation.transpose(1, 2, 0), command.stamp,
                 command.frame_id))
         self._timing.add('publish', time.perf_counter() - start)
+        self._check_cmd_vel_type()
         self._note(command)
+
+    def _publish_command(self) -> None:
+        """Publish the current command; a TwistStamped is stamped now, on the node's clock."""
+        stamped = self.settings.cmd_vel_stamped
+        self.pub_cmd.publish(ros_msgs.cmd_vel_msg(
+            *self._command, self.get_clock().now().to_msg() if stamped else None,
+            self.settings.frame_id))
+
+    def _check_cmd_vel_type(self) -> None:
+        """Log (once) a cmd_vel subscriber that takes the other type: it would never hear us."""
+        if self._type_checked or self.pub_cmd.get_subscription_count():
+            return
+        problem = sim_graph.cmd_vel_mismatch(self, self.settings.cmd_vel_stamped)
+        if problem:
+            self._type_checked = True
+            self.get_logger().error(problem)
 
     def _decision_msg(self, command: Command) -> JointState:
         stamp = command.stamp if command.stamp is not None else self.get_clock().now().to_msg()
@@ -159,12 +197,10 @@ class PolicyNode(Node):
                 self.get_clock().now().to_msg(), hardware_id='nav_gym'))
 
     def stop_robot(self) -> None:
-        """Publish a zero Twist and wait (briefly) until its subscribers have it."""
-        self.pub_cmd.publish(_twist(0.0, 0.0))
+        """Publish a zero command and wait (briefly) until its subscribers have it."""
+        if self._repeat_timer is not None:
+            self.destroy_timer(self._repeat_timer)
+            self._repeat_timer = None
+        self._command = (0.0, 0.0)
+        self._publish_command()
         self.pub_cmd.wait_for_all_acked(Duration(seconds=STOP_ACK_S))
-
-
-def _twist(linear: float, angular: float) -> Twist:
-    msg = Twist()
-    msg.linear.x, msg.angular.z = float(linear), float(angular)
-    return msg

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -17,20 +18,34 @@ import yaml
 
 from nav_gym.env.config import EnvConfig, parse_mapping
 from nav_gym.errors import TrainConfigError
-from nav_sim.core.config import SimConfig, convert, setting
+from nav_sim.core.config import (
+    AT_LEAST_ONE,
+    FRACTION,
+    NON_NEGATIVE,
+    POSITIVE,
+    Bounds,
+    SimConfig,
+    check_bounds,
+    convert,
+    setting,
+)
 from nav_sim.core.world_file import world_settings
 from nav_sim.errors import ConfigError
+from nav_sim.paths import plain_name_problem
 from nav_sim.ros.process import typed_params
 
 _ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
+#: the torch devices a run may name
+DEVICE = re.compile(r'auto|cpu|cuda(:\d+)?')
 #: the components' flags (LearnerSpec fields), each with its value that turns the component off
 COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0,
               'prioritized_replay': False}
 
 
 def _env(name: str) -> Any:
-    """Declare a field with the default and description of the EnvConfig field ``name``."""
-    return setting(_ENV_FIELDS[name].default, _ENV_FIELDS[name].metadata['help'])
+    """Declare a field as the EnvConfig field ``name`` declares it (default, help, bounds)."""
+    return dataclasses.field(default=_ENV_FIELDS[name].default,
+                             metadata=_ENV_FIELDS[name].metadata)
 
 
 @dataclass(frozen=True)
@@ -49,28 +64,21 @@ class LearnerSpec:
                              "SB3's DQN target (with n_steps 1 and every other component off, "
                              "the workshop's learner, SB3's DQN exactly: config/workshop.yaml)")
     n_steps: int = setting(3, "n-step returns (SB3's NStepReplayBuffer; Sutton 1988, Rainbow); "
-                           '1: one-step targets')
+                           '1: one-step targets', AT_LEAST_ONE)
     dueling: bool = setting(False, 'a dueling head, Q = V + A - mean(A) (Wang et al. 2016)')
     augment_shift: int = setting(0, 'shift every sampled observation at random by up to this '
                                  'many pixels, edges replicated (DrQ, Kostrikov et al. 2021; '
-                                 'RAD); 0: off')
+                                 'RAD); 0: off', NON_NEGATIVE)
     prioritized_replay: bool = setting(False, 'proportional prioritized replay with importance '
                                        'weights (Schaul et al. 2016)')
     priority_alpha: float = setting(0.6, 'prioritized replay: priority = (|TD error| + '
-                                    'eps)^alpha')
+                                    'eps)^alpha', FRACTION)
     priority_beta: float = setting(0.4, 'prioritized replay: importance-weight exponent at the '
-                                   'start, annealed linearly to 1')
+                                   'start, annealed linearly to 1', FRACTION)
 
     def __post_init__(self) -> None:
-        """Refuse values the learner cannot use (TrainConfigError naming the setting)."""
-        if int(self.n_steps) < 1:
-            raise TrainConfigError(f'n_steps must be >= 1, got {self.n_steps!r}')
-        if int(self.augment_shift) < 0:
-            raise TrainConfigError(f'augment_shift must be >= 0, got {self.augment_shift!r}')
-        for name in ('priority_alpha', 'priority_beta'):
-            if not 0.0 <= getattr(self, name) <= 1.0:
-                raise TrainConfigError(f'{name} must be within [0, 1], got '
-                                       f'{getattr(self, name)!r}')
+        """Refuse values the learner cannot use (TrainConfigError): each field's bounds."""
+        check_bounds(self, TrainConfigError)
 
     @property
     def vanilla(self) -> bool:
@@ -104,27 +112,33 @@ def learner_of(settings: dict[str, Any]) -> LearnerSpec:
 
 
 def _learner(name: str) -> Any:
-    """Declare a field with the default and description of the LearnerSpec field ``name``."""
-    return setting(_LEARNER_FIELDS[name].default, _LEARNER_FIELDS[name].metadata['help'])
+    """Declare a field as the LearnerSpec field ``name`` declares it (default, help, bounds)."""
+    return dataclasses.field(default=_LEARNER_FIELDS[name].default,
+                             metadata=_LEARNER_FIELDS[name].metadata)
 
 
 @dataclass(frozen=True)
 class TrainConfig:
     """The learner on Monitor(NavigationEnv): Double DQN, 3-step returns, the workshop settings."""
 
-    total_timesteps: int = setting(50_000, 'environment steps to train for')
-    learning_rate: float = setting(1e-4, 'optimiser step size')
-    buffer_size: int = setting(50_000, 'replay buffer capacity (transitions)')
-    learning_starts: int = setting(2_000, 'steps collected before gradient updates begin')
-    batch_size: int = setting(32, 'transitions per gradient step')
-    gamma: float = setting(0.99, 'discount factor')
-    train_freq: int = setting(4, 'environment steps between gradient updates (SB3 default)')
-    gradient_steps: int = setting(1, 'gradient steps per update (SB3 default)')
-    target_update_interval: int = setting(1_000, 'steps between target-network updates')
-    exploration_fraction: float = setting(0.25, 'fraction of training over which epsilon decays')
-    exploration_initial_eps: float = setting(1.0, 'initial epsilon (SB3 default)')
-    exploration_final_eps: float = setting(0.05, 'final epsilon')
-    seed: int = setting(9, 'seed of DQN, the env and its scenario sequence')
+    total_timesteps: int = setting(50_000, 'environment steps to train for', AT_LEAST_ONE)
+    learning_rate: float = setting(1e-4, 'optimiser step size', POSITIVE)
+    buffer_size: int = setting(50_000, 'replay buffer capacity (transitions)', AT_LEAST_ONE)
+    learning_starts: int = setting(2_000, 'steps collected before gradient updates begin',
+                                   NON_NEGATIVE)
+    batch_size: int = setting(32, 'transitions per gradient step', AT_LEAST_ONE)
+    gamma: float = setting(0.99, 'discount factor', Bounds(0.0, 1.0, low_open=True))
+    train_freq: int = setting(4, 'environment steps between gradient updates (SB3 default)',
+                              AT_LEAST_ONE)
+    gradient_steps: int = setting(1, 'gradient steps per update (SB3 default)', AT_LEAST_ONE)
+    target_update_interval: int = setting(1_000, 'steps between target-network updates',
+                                          AT_LEAST_ONE)
+    exploration_fraction: float = setting(0.25, 'fraction of training over which epsilon decays',
+                                          Bounds(0.0, 1.0, low_open=True))
+    exploration_initial_eps: float = setting(1.0, 'initial epsilon (SB3 default)', FRACTION)
+    exploration_final_eps: float = setting(0.05, 'final epsilon', FRACTION)
+    seed: int = setting(9, 'seed of DQN, the env and its scenario sequence',
+                        Bounds(0, 2**32 - 1))
     double_q: bool = _learner('double_q')
     n_steps: int = _learner('n_steps')
     dueling: bool = _learner('dueling')
@@ -132,7 +146,8 @@ class TrainConfig:
     prioritized_replay: bool = _learner('prioritized_replay')
     priority_alpha: float = _learner('priority_alpha')
     priority_beta: float = _learner('priority_beta')
-    checkpoint_freq: int = setting(10_000, 'steps between checkpoints (all are kept)')
+    checkpoint_freq: int = setting(10_000, 'steps between checkpoints (all are kept)',
+                                   AT_LEAST_ONE)
     save_replay_buffer: bool = setting(True, 'save the replay buffer with checkpoints (for '
                                        '--resume)')
     keep_replay_buffer: bool = setting(False, 'keep checkpoints/replay_buffer.pkl when the run '
@@ -147,6 +162,7 @@ class TrainConfig:
     sim: str = _env('sim')
     sim_timeout: float = _env('sim_timeout')
     probe_timeout: float = _env('probe_timeout')
+    cmd_vel_stamped: bool = _env('cmd_vel_stamped')
     forward_speed: float = _env('forward_speed')
     turn_rate: float = _env('turn_rate')
     turn_speed: float = _env('turn_speed')
@@ -157,15 +173,26 @@ class TrainConfig:
     sim_params: dict = _env('sim_params')
 
     def __post_init__(self) -> None:
-        """Check the values (a clear TrainConfigError for a bad one)."""
-        for name in ('total_timesteps', 'buffer_size', 'batch_size', 'train_freq',
-                     'gradient_steps', 'target_update_interval', 'checkpoint_freq'):
-            if int(getattr(self, name)) < 1:
-                raise TrainConfigError(f'{name} must be >= 1, got {getattr(self, name)!r}')
-        if self.learning_starts < 0:
-            raise TrainConfigError('learning_starts must be >= 0')
-        if not 0 < self.exploration_fraction <= 1:
-            raise TrainConfigError('exploration_fraction must be in (0, 1]')
+        """Check the values (a clear TrainConfigError for a bad one), before anything starts.
+
+        Each field's bounds (its declaration states them), then the rules between fields, the
+        run's name, the device, the learner's and the env's own checks.
+        """
+        check_bounds(self, TrainConfigError)
+        if self.buffer_size < self.batch_size:
+            raise TrainConfigError(f'buffer_size must be >= batch_size ({self.batch_size}), got '
+                                   f'{self.buffer_size}')
+        if self.exploration_final_eps > self.exploration_initial_eps:
+            raise TrainConfigError(
+                f'exploration_final_eps must be <= exploration_initial_eps '
+                f'({self.exploration_initial_eps}), got {self.exploration_final_eps}')
+        if not DEVICE.fullmatch(self.device):
+            raise TrainConfigError(f"device must be 'auto', 'cpu', 'cuda' or 'cuda:N', got "
+                                   f'{self.device!r}')
+        if self.run_name:
+            problem = plain_name_problem('run_name', self.run_name)
+            if problem:
+                raise TrainConfigError(problem)
         self.learner()  # the learner's own checks
         # the env's checks, and its resolved values (sim_params {}, the world's episode limit)
         env = EnvConfig(**{name: getattr(self, name) for name in _ENV_FIELDS})

@@ -41,7 +41,7 @@ from nav_gym.training.run_dir import (
     load_config,
 )
 from nav_gym.training.timing import EnvTimer
-from nav_sim.errors import NavSimError
+from nav_sim.errors import NavSimError, describe_exception
 from nav_sim.viz.options import add_live_argument
 
 
@@ -140,7 +140,7 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, hint: str,
         steps_before = model.num_timesteps
         if not resume:
             save_checkpoint(model, run_dir, with_buffer=False)  # step-0 reference
-        failure = None
+        failure, error = None, None
         try:
             model.learn(max(config.total_timesteps - steps_before, 0),
                         callback=[make_callback(config, run_dir),
@@ -152,6 +152,8 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, hint: str,
             outcome = 'interrupted'
         except NavSimError as exc:  # the sim died or stopped answering
             outcome, failure = 'sim failed', _sim_failure(timer, exc)
+        except Exception as exc:  # noqa: BLE001 - a library's error: keep what was learned
+            outcome, failure, error = 'failed', f'unexpected {describe_exception(exc)}', exc
         summary = _summary(config, run_dir, resume, outcome, model, steps_before,
                            time.perf_counter() - start, timer, env)
         saved: list[str] = []
@@ -170,7 +172,8 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, hint: str,
         if env is not None:
             env.close()
     if failure is not None:
-        raise TrainingError(f'{failure}; saved {path} (step {model.num_timesteps}); {hint}')
+        raise TrainingError(f'{failure}; saved {path} (step {model.num_timesteps}); {hint}'
+                            ) from error
     if outcome == 'interrupted':
         print(f'\ninterrupted at step {model.num_timesteps}: checkpoint {path}; {hint}',
               flush=True)

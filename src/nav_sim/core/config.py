@@ -79,12 +79,84 @@ def convert(name: str, kind: type, value: Any) -> Any:
     raise error
 
 
-def setting(default: Any, help: str) -> Any:
-    """Declare a config dataclass field with its default and its one-line description.
+@dataclass(frozen=True)
+class Bounds:
+    """The values a numeric setting allows: finite, from ``low`` to ``high``.
 
-    The description is what the ROS parameter descriptor, the params file and ``--help`` say.
+    Each bound is included unless its ``*_open`` flag says otherwise.  The one place where a
+    setting's range is stated: :func:`check_bounds` enforces it wherever a config is built (the
+    CLI, a params or YAML file, a sweep's ``--set``, a ROS parameter), and the tests generate
+    their cases from it (:meth:`outside`).
     """
-    return field(default=default, metadata={'help': help})
+
+    low: float = -math.inf
+    high: float = math.inf
+    low_open: bool = False
+    high_open: bool = False
+
+    def allows(self, value: Any) -> bool:
+        """Tell whether ``value`` is a finite real number within the bounds."""
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            return False
+        if not math.isfinite(value):
+            return False
+        above = value > self.low if self.low_open else value >= self.low
+        below = value < self.high if self.high_open else value <= self.high
+        return above and below
+
+    def describe(self) -> str:
+        """Say what is allowed: '> 0', '>= 1', 'in (0, 1]', 'a finite number'."""
+        low, high = _number(self.low), _number(self.high)
+        if math.isinf(self.low) and math.isinf(self.high):
+            return 'a finite number'
+        if math.isinf(self.high):
+            return f"{'>' if self.low_open else '>='} {low}"
+        if math.isinf(self.low):
+            return f"{'<' if self.high_open else '<='} {high}"
+        return (f"in {'(' if self.low_open else '['}{low}, {high}"
+                f"{')' if self.high_open else ']'}")
+
+    def outside(self, kind: type) -> list[Any]:
+        """Return values of type ``kind`` just outside the bounds (and NaN, inf for floats)."""
+        step = 1 if kind is int else 1e-3
+        values: list[Any] = [] if kind is int else [math.nan, math.inf]
+        if not math.isinf(self.low):
+            values.append(kind(self.low) if self.low_open else kind(self.low - step))
+        if not math.isinf(self.high):
+            values.append(kind(self.high) if self.high_open else kind(self.high + step))
+        return values
+
+
+POSITIVE = Bounds(0.0, low_open=True)
+NON_NEGATIVE = Bounds(0.0)
+AT_LEAST_ONE = Bounds(1.0)
+FRACTION = Bounds(0.0, 1.0)
+FINITE = Bounds()
+
+
+def _number(value: float) -> str:
+    return str(int(value)) if float(value).is_integer() else f'{value:g}'
+
+
+def setting(default: Any, help: str, bounds: Bounds | None = None) -> Any:
+    """Declare a config dataclass field with its default, its one-line description and range.
+
+    The description is what the ROS parameter descriptor, the params file and ``--help`` say;
+    ``bounds`` (a number's allowed values) is checked by :func:`check_bounds`.
+    """
+    metadata: dict[str, Any] = {'help': help}
+    if bounds is not None:
+        metadata['bounds'] = bounds
+    return field(default=default, metadata=metadata)
+
+
+def check_bounds(config: Any, error: type[Exception] = ConfigError) -> None:
+    """Raise ``error`` for the first field of ``config`` outside its bounds: name, value, range."""
+    for item in dataclasses.fields(config):
+        bounds = item.metadata.get('bounds')
+        value = getattr(config, item.name)
+        if bounds is not None and not bounds.allows(value):
+            raise error(f'{item.name} must be {bounds.describe()}, got {value!r}')
 
 
 @dataclass(frozen=True)
@@ -94,39 +166,47 @@ class SimConfig:
     world: str = setting('arena.xml', 'MJCF world: a name under share/nav_sim/worlds (arena.xml, '
                          'clutter.xml, rooms.xml) or a path (docs/worlds.md)')
     sim_dt: float = setting(0.032, 'physics timestep in seconds (Webots basicTimeStep default: '
-                            '32 ms)')
+                            '32 ms)', POSITIVE)
     action_repeat: int = setting(16, 'physics steps per control period (ctrl_dt = sim_dt * '
-                                 'repeat)')
-    settle_steps: int = setting(2, 'physics steps with motors stopped after a reset')
-    wheel_radius: float = setting(0.0205, 'wheel radius in metres (e-puck: 2.05 cm)')
-    axle_length: float = setting(0.052, 'distance between the wheels in metres (e-puck: 5.2 cm)')
-    max_wheel_speed: float = setting(6.28, 'wheel speed limit in rad/s (e-puck: 6.28 rad/s)')
-    camera_width: int = setting(128, 'native camera image width in pixels')
-    camera_height: int = setting(96, 'native camera image height in pixels')
+                                 'repeat)', AT_LEAST_ONE)
+    settle_steps: int = setting(2, 'physics steps with motors stopped after a reset', AT_LEAST_ONE)
+    wheel_radius: float = setting(0.0205, 'wheel radius in metres (e-puck: 2.05 cm)', POSITIVE)
+    axle_length: float = setting(0.052, 'distance between the wheels in metres (e-puck: 5.2 cm)',
+                                 POSITIVE)
+    max_wheel_speed: float = setting(6.28, 'wheel speed limit in rad/s (e-puck: 6.28 rad/s)',
+                                     POSITIVE)
+    camera_width: int = setting(128, 'native camera image width in pixels', AT_LEAST_ONE)
+    camera_height: int = setting(96, 'native camera image height in pixels', AT_LEAST_ONE)
     camera_hfov_deg: float = setting(90.0, 'horizontal field of view in degrees (e-puck: 0.84 '
-                                     'rad = 48°; a wide-angle lens by default)')
+                                     'rad = 48°; a wide-angle lens by default)',
+                                     Bounds(1.0, 170.0))
     camera_near_clip: float = setting(0.005, 'camera near clipping distance in metres (surfaces '
-                                      'closer than this are not drawn)')
+                                      'closer than this are not drawn)', POSITIVE)
     camera_mount_forward: float = setting(0.0, 'camera position ahead of the robot centre in '
                                           "metres (0: on a mast over the centre; the e-puck's "
-                                          'own camera is at the front edge, 0.038)')
+                                          'own camera is at the front edge, 0.038)', FINITE)
     camera_mount_height: float = setting(0.10, 'camera height above the floor in metres (e-puck: '
-                                         '0.0455)')
+                                         '0.0455)', POSITIVE)
     camera_pitch_deg: float = setting(25.0, 'camera tilt below the horizontal in degrees '
-                                      '(e-puck: 0, level)')
+                                      '(e-puck: 0, level)', Bounds(-89.0, 89.0))
     goal_radius: float = setting(0.1, 'success when the robot centre is this close to the goal '
-                                 '(m)')
-    goal_marker_radius: float = setting(0.05, 'radius of the green goal cylinder in metres')
+                                 '(m)', POSITIVE)
+    goal_marker_radius: float = setting(0.05, 'radius of the green goal cylinder in metres',
+                                        POSITIVE)
     goal_marker_height: float = setting(0.3, 'height of the green goal cylinder in metres (a '
-                                        'beacon taller than the 16 cm obstacles)')
-    min_start_goal_distance: float = setting(0.6, 'minimum straight-line start-goal distance (m)')
-    num_obstacles: int = setting(3, 'obstacles per layout (at most the slots in the world)')
+                                        'beacon taller than the 16 cm obstacles)', POSITIVE)
+    min_start_goal_distance: float = setting(0.6, 'minimum straight-line start-goal distance (m)',
+                                             POSITIVE)
+    num_obstacles: int = setting(3, 'obstacles per layout (at most the slots in the world)',
+                                 NON_NEGATIVE)
     obstacle_gap: float = setting(0.15, 'free gap in metres between the placed obstacles and to '
-                                  'the walls (0.15: wider than the 7.4 cm robot)')
-    train_layouts: int = setting(20, 'number of layouts in the training bank')
-    heldout_layouts: int = setting(10, 'number of layouts in the held-out bank')
-    train_bank_seed: int = setting(1_000, 'seed that generates the training layout bank')
-    heldout_bank_seed: int = setting(2_000, 'seed that generates the held-out layout bank')
+                                  'the walls (0.15: wider than the 7.4 cm robot)', POSITIVE)
+    train_layouts: int = setting(20, 'number of layouts in the training bank', AT_LEAST_ONE)
+    heldout_layouts: int = setting(10, 'number of layouts in the held-out bank', AT_LEAST_ONE)
+    train_bank_seed: int = setting(1_000, 'seed that generates the training layout bank',
+                                   NON_NEGATIVE)
+    heldout_bank_seed: int = setting(2_000, 'seed that generates the held-out layout bank',
+                                     NON_NEGATIVE)
     randomize_look: bool = setting(False, 'draw the colours of floor, walls and obstacles and '
                                    "the light from each scenario's seed (training and held-out "
                                    'palettes are disjoint; the goal keeps its green)')
@@ -144,32 +224,10 @@ class SimConfig:
                                             / self.camera_width))
 
     def __post_init__(self) -> None:
-        """Refuse values the simulation cannot run with (ConfigError)."""
-        positive = ('sim_dt', 'wheel_radius', 'axle_length', 'max_wheel_speed', 'goal_radius',
-                    'camera_near_clip', 'camera_mount_height', 'obstacle_gap',
-                    'goal_marker_radius', 'goal_marker_height', 'min_start_goal_distance')
-        for name in positive:
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise ConfigError(f'{name} must be a finite number > 0, got {value!r}')
-        for name in ('action_repeat', 'camera_width', 'camera_height', 'train_layouts',
-                     'heldout_layouts'):
-            if int(getattr(self, name)) < 1:
-                raise ConfigError(f'{name} must be >= 1, got {getattr(self, name)!r}')
-        if self.settle_steps < 1:
-            # the reset frame must get a new stamp: clients tell it from the previous episode's
-            # last frame by the stamp
-            raise ConfigError(f'settle_steps must be >= 1, got {self.settle_steps!r}')
-        if self.num_obstacles < 0:
-            raise ConfigError('num_obstacles must be >= 0')
-        if not 1.0 <= self.camera_hfov_deg <= 170.0:
-            raise ConfigError(f'camera_hfov_deg must be in [1, 170], got {self.camera_hfov_deg}')
-        if not -89.0 <= self.camera_pitch_deg <= 89.0:
-            raise ConfigError(f'camera_pitch_deg must be in [-89, 89], got '
-                              f'{self.camera_pitch_deg!r}')
-        if not math.isfinite(self.camera_mount_forward):
-            raise ConfigError(f'camera_mount_forward must be finite, got '
-                              f'{self.camera_mount_forward!r}')
+        """Refuse values the simulation cannot run with (ConfigError): each field's bounds."""
+        # settle_steps >= 1: the reset frame must get a new stamp (clients tell it from the
+        # previous episode's last frame by the stamp)
+        check_bounds(self)
 
     @classmethod
     def from_dict(cls, values: dict[str, Any]) -> SimConfig:

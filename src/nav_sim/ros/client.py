@@ -18,7 +18,7 @@ from typing import Any
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped, Twist
+from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
@@ -31,6 +31,7 @@ from nav_sim.core.events import EVENT_NONE
 from nav_sim.errors import FrameSyncError, ScenarioError, SimConflictError, SimUnavailableError
 from nav_sim.ros import messages as ros_msgs
 from nav_sim.ros import qos, sim_graph
+from nav_sim.ros.claim import Claim
 
 POLL_S = 0.25
 RESET_RETRY_S = 1.0
@@ -60,11 +61,14 @@ class SimClient:
     """Drive a running nav_sim node in lockstep."""
 
     def __init__(self, namespace: str = '', timeout: float = 10.0,
-                 node_name: str = 'visnav_client') -> None:
+                 node_name: str = 'visnav_client', cmd_vel_stamped: bool = False) -> None:
         """Create the client's own context and node in ``namespace``.
 
-        Every wait is bounded by ``timeout`` seconds.
+        Every wait is bounded by ``timeout`` seconds.  ``cmd_vel_stamped`` sends ``cmd_vel`` as
+        TwistStamped (the sim's setting of the same name must agree: :meth:`wait_for_sim` says
+        so if it does not).
         """
+        self.cmd_vel_stamped = cmd_vel_stamped
         self.namespace = namespace.rstrip('/')
         self.timeout = timeout
         self.context = rclpy.Context()
@@ -90,10 +94,12 @@ class SimClient:
         # sim's whole control period.  Services and the latched goal go through the executor.
         self._wait_set = _rclpy.WaitSet(len(self._subs), 0, 0, 0, 0, 0, self.context.handle)
         n.create_subscription(PoseStamped, interface.GOAL_TOPIC, self._on_goal, qos.LATCHED)
-        self.pub_cmd = n.create_publisher(Twist, interface.CMD_VEL_TOPIC, qos.CONTROL)
+        self.pub_cmd = n.create_publisher(ros_msgs.cmd_vel_class(cmd_vel_stamped),
+                                          interface.CMD_VEL_TOPIC, qos.CONTROL)
         self.cli_reset = n.create_client(Trigger, interface.RESET_SERVICE)
         self.cli_stop = n.create_client(Trigger, interface.STOP_SERVICE)
         self.cli_params = n.create_client(SetParameters, interface.PARAMETERS_SERVICE)
+        self.claim = Claim(n)  # one controlling client per sim: taken by wait_for_sim
         self._executor = SingleThreadedExecutor(context=self.context)
         self._executor.add_node(n)
 
@@ -257,13 +263,17 @@ class SimClient:
         sim process this client started has died).  ``started`` (the sim process this client
         started says it is up) must hold too: another sim answering is not this one.  More than
         one sim in the namespace raises SimConflictError (discovery may show a second one only
-        later: each reset checks again).
+        later: each reset checks again).  Found, the sim is claimed for this process
+        (:mod:`nav_sim.ros.claim`): a client of another process that controls it already
+        raises SimInUseError.
         """
         limit = timeout or self.timeout
         deadline = time.monotonic() + limit
         while not (self.sim_present() and self.cli_reset.service_is_ready()
                    and self._matched() and (started is None or started())):
             self.check_single_sim()
+            if self.pub_cmd.get_subscription_count() == 0 and self.sim_present():
+                sim_graph.refuse_cmd_vel_mismatch(self.node, self.cmd_vel_stamped, self.where)
             reason = abort() if abort is not None else None
             if reason:
                 raise SimUnavailableError(f'nav_sim in {self.where} did not start: {reason}')
@@ -273,6 +283,8 @@ class SimClient:
                     '`ros2 run nav_sim sim_node` (add `--ros-args -r __ns:=/NS` for a namespace)')
             self._executor.spin_once(timeout_sec=0.05)
         self.check_single_sim(by_name=True)
+        self.claim.acquire(lambda t: self._executor.spin_once(timeout_sec=t), self.where,
+                           limit)
 
     def set_parameters(self, **values: Any) -> None:
         """Set sim_node parameters (e.g. seed, split); raises ScenarioError if refused."""
@@ -329,8 +341,9 @@ class SimClient:
 
     def step(self, linear: float, angular: float, after: Frame) -> Frame:
         """Publish one cmd_vel and return the frame of the control period it caused."""
-        msg = Twist()
-        msg.linear.x, msg.angular.z = float(linear), float(angular)
+        msg = ros_msgs.cmd_vel_msg(
+            linear, angular, self.node.get_clock().now().to_msg() if self.cmd_vel_stamped
+            else None)
         expected = after.period + 1
         self.pub_cmd.publish(msg)
         frame = self._wait_frame(lambda f: f.period >= expected, 'observation after cmd_vel')

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from geometry_msgs.msg import PoseStamped, Quaternion
+from geometry_msgs.msg import PoseStamped, Quaternion, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
@@ -54,6 +54,28 @@ def image_msg(rgb: np.ndarray, stamp: Time, frame_id: str) -> Image:
     msg.header.frame_id = frame_id
     msg.data = array.array('B', np.ascontiguousarray(rgb).tobytes())
     return msg
+
+
+def cmd_vel_class(stamped: bool) -> type:
+    """Return the ``cmd_vel`` message class: ``TwistStamped`` if ``stamped``, else ``Twist``."""
+    return TwistStamped if stamped else Twist
+
+
+def cmd_vel_msg(linear: float, angular: float, stamp: Time | None = None,
+                frame_id: str = '') -> Twist | TwistStamped:
+    """Return a ``cmd_vel``: a ``Twist``, or a ``TwistStamped`` when ``stamp`` is given."""
+    twist = Twist()
+    twist.linear.x, twist.angular.z = float(linear), float(angular)
+    if stamp is None:
+        return twist
+    msg = TwistStamped(twist=twist)
+    msg.header.stamp, msg.header.frame_id = stamp, frame_id
+    return msg
+
+
+def twist_of(msg: Twist | TwistStamped) -> Twist:
+    """Return the ``Twist`` a ``cmd_vel`` carries (itself, or a ``TwistStamped``'s)."""
+    return msg.twist if isinstance(msg, TwistStamped) else msg
 
 
 def camera_info_msg(width: int, height: int, fovy_deg: float, stamp: Time,

@@ -17,7 +17,7 @@ import time
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
-from geometry_msgs.msg import PoseStamped, Twist
+from geometry_msgs.msg import PoseStamped, Twist, TwistStamped
 from nav_msgs.msg import Odometry
 from rclpy.node import Node
 from rclpy.serialization import serialize_message
@@ -34,6 +34,7 @@ from nav_sim.core.step_timing import StepTiming
 from nav_sim.errors import NavSimError
 from nav_sim.ros import messages as ros_msgs
 from nav_sim.ros import qos, sim_graph
+from nav_sim.ros.claim import ClaimArbiter
 from nav_sim.ros.node_params import (
     declare_settings,
     given,
@@ -107,10 +108,14 @@ class SimNode(Node):
             self.settings.camera_frame)
         # /diagnostics as diagnostic_updater publishes it: absolute, reliable, depth 10
         self.pub_diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.sub_cmd = self.create_subscription(Twist, interface.CMD_VEL_TOPIC, self._on_cmd_vel,
-                                                 qos.CONTROL)
-        self.create_service(Trigger, interface.RESET_SERVICE, self._on_reset)
-        self.create_service(Trigger, interface.STOP_SERVICE, self._on_stop)
+        self.sub_cmd = self.create_subscription(
+            ros_msgs.cmd_vel_class(self.settings.cmd_vel_stamped), interface.CMD_VEL_TOPIC,
+            self._on_cmd_vel, qos.CONTROL)
+        self.create_service(Trigger, interface.RESET_SERVICE, self._on_reset,
+                            qos_profile=qos.SERVICE_REQUESTS)
+        self.create_service(Trigger, interface.STOP_SERVICE, self._on_stop,
+                            qos_profile=qos.SERVICE_REQUESTS)
+        self.claims = ClaimArbiter(self)  # one controlling client at a time
 
     # --- parameters -----------------------------------------------------------------------
     def _check_settings(self, values: dict[str, Any]) -> None:
@@ -188,8 +193,8 @@ class SimNode(Node):
                 throttle_duration_sec=WARN_PERIOD_S)
         return command
 
-    def _on_cmd_vel(self, msg: Twist) -> None:
-        command = self.command_from_twist(msg)
+    def _on_cmd_vel(self, msg: Twist | TwistStamped) -> None:
+        command = self.command_from_twist(ros_msgs.twist_of(msg))
         if self.settings.mode == 'realtime':
             self._latest_cmd, self._latest_cmd_time = command, time.monotonic()
             return

@@ -103,6 +103,17 @@ def child_preexec() -> None:
         ctypes.CDLL(None, use_errno=True).prctl(1, ctypes.c_ulong(signal.SIGTERM))  # PDEATHSIG
 
 
+def exit_status(code: int) -> str:
+    """Say how a process ended: 'exited with code 1', 'was killed by signal SIGKILL (9)'."""
+    if code < 0:
+        try:
+            name = signal.Signals(-code).name
+        except ValueError:
+            name = 'an unknown signal'
+        return f'was killed by signal {name} ({-code})'
+    return f'exited with code {code}'
+
+
 class NodeProcess:
     """A ROS node child process; ``stop()`` sends SIGINT and always reaps it."""
 
@@ -139,7 +150,7 @@ class NodeProcess:
         errors = [line.removeprefix(ERROR_PREFIX) for line in lines
                   if line.startswith(ERROR_PREFIX)]
         tail = ': ' + ' | '.join(errors or lines[-5:]) if lines else ''
-        return f'{self.name} exited with code {code}{tail}'
+        return f'{self.name} (pid {self.process.pid}) {exit_status(code)}{tail}'
 
     def ready(self) -> bool:
         """Tell whether the node has logged that it finished starting.

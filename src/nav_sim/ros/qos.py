@@ -16,6 +16,10 @@ OBSERVATION = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 LATCHED = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                      reliability=ReliabilityPolicy.RELIABLE,
                      durability=DurabilityPolicy.TRANSIENT_LOCAL)
+#: a subscription to a latched topic with many publishers (the sim's claims): one each
+LATCHED_MANY = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                          reliability=ReliabilityPolicy.RELIABLE,
+                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
 #: /clock, as the sim publishes it
 CLOCK = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                    reliability=ReliabilityPolicy.RELIABLE,
@@ -30,3 +34,9 @@ SENSOR_DATA = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
 DECISIONS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                        reliability=ReliabilityPolicy.RELIABLE,
                        durability=DurabilityPolicy.VOLATILE)
+
+#: the sim's services (reset, stop): a burst of requests is queued, never dropped (ROS's default
+#: keeps 10); a request ROS drops before it reaches the sim (a client gone) is not answered
+SERVICE_REQUESTS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                              reliability=ReliabilityPolicy.RELIABLE,
+                              durability=DurabilityPolicy.VOLATILE)

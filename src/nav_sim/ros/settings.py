@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 
 from nav_sim import interface
-from nav_sim.core.config import TRAIN, SimConfig, setting
+from nav_sim.core.config import POSITIVE, TRAIN, Bounds, SimConfig, check_bounds, convert, setting
 from nav_sim.errors import ConfigError
 
 
@@ -38,28 +38,26 @@ class NodeConfig:
     seed: int = setting(0, 'scenario seed used by the next reset (non-negative integer)')
     split: str = setting(TRAIN, "scenario bank used by the next reset: 'train' or 'heldout'")
     reset_on_start: bool = setting(True, 'load the scenario of (seed, split) when the node starts')
-    realtime_rate: float = setting(1.0, 'realtime mode: simulated seconds per wall-clock second')
+    realtime_rate: float = setting(1.0, 'realtime mode: simulated seconds per wall-clock second',
+                                   POSITIVE)
     cmd_vel_timeout: float = setting(0.5, 'realtime mode: stop the motors after this long (wall '
-                                     'seconds) without a cmd_vel')
+                                     'seconds) without a cmd_vel', POSITIVE)
+    cmd_vel_stamped: bool = setting(False, 'take cmd_vel as geometry_msgs/TwistStamped (what '
+                                    "Jazzy's diff_drive_controller takes) instead of Twist; "
+                                    'fixed once the node starts')
     publish_clock: bool = setting(True, 'publish sim time on /clock')
     odom_frame: str = setting(interface.ODOM_FRAME, 'frame of the odometry, the goal pose and '
                               "the live view's 3D scene")
     base_frame: str = setting('base_link', 'frame of the robot body')
     camera_frame: str = setting('camera_optical_frame', 'optical frame of the camera images')
     live_port: int = setting(0, 'serve a Foxglove live view (camera, 3D scene, events, '
-                             '/diagnostics) on ws://localhost:PORT; 0 = off')
+                             '/diagnostics) on ws://localhost:PORT; 0 = off', Bounds(0, 65535))
 
     def __post_init__(self) -> None:
         """Refuse values the node cannot run with (ConfigError)."""
         if self.mode not in MODES:
             raise ConfigError(f'mode must be one of {list(MODES)}, got {self.mode!r}')
-        if not (math.isfinite(self.realtime_rate) and self.realtime_rate > 0):
-            raise ConfigError(f'realtime_rate must be > 0, got {self.realtime_rate!r}')
-        if not (math.isfinite(self.cmd_vel_timeout) and self.cmd_vel_timeout > 0):
-            raise ConfigError(f'cmd_vel_timeout must be > 0, got {self.cmd_vel_timeout!r}')
-        if isinstance(self.live_port, bool) or not 0 <= self.live_port <= 65535:
-            raise ConfigError(f'live_port must be 0 (off) or a TCP port up to 65535, got '
-                              f'{self.live_port!r}')
+        check_bounds(self)  # live_port: 0 (off) or a TCP port
         # seed and split are checked when they are set and again by each reset, which reports
         # a bad value as success=false instead of refusing to start the node.
 
@@ -67,6 +65,22 @@ class NodeConfig:
 #: every sim_node parameter and its declared type (the type of its default)
 PARAMETER_TYPES: dict[str, type] = {f.name: type(f.default) for c in (SimConfig, NodeConfig)
                                     for f in dataclasses.fields(c)}
+_NODE_FIELDS = {f.name for f in dataclasses.fields(NodeConfig)}
+
+
+def check_sim_params(params: dict) -> None:
+    """Check sim_node parameters as the node would at its start (names, types, bounds).
+
+    Raises ConfigError in one line; a command that starts a sim checks its parameters here
+    before it starts anything.  ``use_sim_time`` is ROS's own.
+    """
+    unknown = sorted(set(params) - set(PARAMETER_TYPES) - {'use_sim_time'})
+    if unknown:
+        raise ConfigError(f'unknown sim_node parameter(s) {unknown}; known: '
+                          f'{sorted(PARAMETER_TYPES)}')
+    SimConfig.from_params(params)
+    NodeConfig(**{key: convert(key, PARAMETER_TYPES[key], value)
+                  for key, value in params.items() if key in _NODE_FIELDS})
 
 _MAX_TIMER_NS = 2**63 - 1  # a ROS timer period is a signed 64-bit count of nanoseconds
 

@@ -8,9 +8,12 @@ client that has just started may not have yet).
 
 from __future__ import annotations
 
+from collections.abc import Collection
+
 from rclpy.node import Node
 
-from nav_sim.interface import IMAGE_TOPIC, RESET_SERVICE
+from nav_sim.errors import SimConflictError
+from nav_sim.interface import CMD_VEL_TOPIC, IMAGE_TOPIC, RESET_SERVICE, cmd_vel_type
 
 #: how a refusal for this reason begins (a reset response message, an exception message)
 CONFLICT = 'several sims in one namespace'
@@ -29,7 +32,7 @@ def sim_nodes(node: Node) -> list[str]:
     One entry per publisher: two sims started under the same node name appear twice.
     """
     camera = node.resolve_topic_name(IMAGE_TOPIC)
-    names = [_full_name(info.node_namespace, info.node_name)
+    names = [full_name(info.node_namespace, info.node_name)
              for info in node.get_publishers_info_by_topic(camera)]
     reset = node.resolve_service_name(RESET_SERVICE)
     if node.count_services(reset):
@@ -38,7 +41,7 @@ def sim_nodes(node: Node) -> list[str]:
                 services = node.get_service_names_and_types_by_node(name, namespace)
             except Exception:  # noqa: BLE001 - the node left the graph meanwhile
                 continue
-            full = _full_name(namespace, name)
+            full = full_name(namespace, name)
             if full not in names and any(service == reset for service, _ in services):
                 names.append(full)
     return names
@@ -53,5 +56,36 @@ def conflict_message(node: Node, names: list[str]) -> str:
             '(`--ros-args -r __ns:=/NAME`)')
 
 
-def _full_name(namespace: str, name: str) -> str:
+def cmd_vel_mismatch(node: Node, stamped: bool,
+                     among: Collection[str] | None = None) -> str | None:
+    """Say which node takes ``cmd_vel`` as another type than this setting's, or None.
+
+    ROS 2 matches a publisher to a subscriber only where their types agree, so a mismatch is a
+    silence, not an error: nothing would step the sim.  The graph still shows every endpoint's
+    type, and this names the first subscriber (of the nodes ``among``, or any) that differs.
+    """
+    topic = node.resolve_topic_name(CMD_VEL_TOPIC)
+    mine = cmd_vel_type(stamped)
+    infos = node.get_subscriptions_info_by_topic(topic)
+    own = node.get_fully_qualified_name()
+    for info in infos:
+        name = full_name(info.node_namespace, info.node_name)
+        if UNKNOWN_NODE in name:  # its name comes later: name it then
+            continue
+        if info.topic_type != mine and name != own and (among is None or name in among):
+            return (f'{name} takes {topic} as {info.topic_type}, but {own} uses {mine} '
+                    f'(cmd_vel_stamped {str(stamped).lower()}): give both the same '
+                    'cmd_vel_stamped setting')
+    return None
+
+
+def refuse_cmd_vel_mismatch(node: Node, stamped: bool, where: str) -> None:
+    """Raise SimConflictError if the sim in ``node``'s namespace takes the other cmd_vel type."""
+    problem = cmd_vel_mismatch(node, stamped, among=sim_nodes(node))
+    if problem:
+        raise SimConflictError(f'nav_sim in {where}: {problem}')
+
+
+def full_name(namespace: str, name: str) -> str:
+    """Return a node's fully qualified name from its namespace and name."""
     return f"{namespace.rstrip('/')}/{name}"

@@ -7,14 +7,17 @@ then a tiny model end to end at a high realtime rate through ``nav-eval-evaluate
 from __future__ import annotations
 
 import json
+import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from helpers import REPO, make_tiny_run
+from helpers import REPO, make_tiny_run, wait_until
 from nav_eval.analysis.closed_loop import (
     Decision,
     Tick,
@@ -168,3 +171,30 @@ def test_no_process_is_left_behind(evaluated):
     left = [line for line in ps.splitlines() if str(evaluated) in line  # the policy node
             or ('visnav_closed_loop_' in line and 'realtime_rate:=8.0' in line)]  # the sim
     assert not left, left
+
+
+def test_a_killed_sim_is_named_as_dead(tmp_path, spaces_only):
+    (tmp_path / 'run').mkdir()
+    run = make_tiny_run(tmp_path / 'run', spaces_only, max_episode_steps=40)
+    process = subprocess.Popen(
+        [str(Path(sys.prefix) / 'bin' / 'nav-eval-evaluate'), str(run), '--closed-loop',
+         '--realtime-rate', '1', '--heldout-seeds', '201-203', '--no-record'],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        marker = f'visnav_closed_loop_{process.pid}_1'
+
+        def sim_pid() -> int | None:
+            ps = subprocess.run(['pgrep', '-f', f'nav_sim.sim_node.*{marker}'],
+                                capture_output=True, text=True).stdout.split()
+            return int(ps[0]) if ps else None
+        pid = wait_until(sim_pid, 300.0, 'the closed loop sim')
+        time.sleep(3.0)  # into the episodes
+        os.kill(pid, signal.SIGKILL)
+        out, err = process.communicate(timeout=120)
+    finally:
+        if process.poll() is None:
+            process.kill()
+            process.communicate()
+    assert process.returncode == 1, out + err
+    (line,) = err.strip().splitlines()
+    assert f'sim_node (pid {pid}) was killed by signal SIGKILL (9)' in line, line

@@ -72,8 +72,9 @@ def test_evaluating_a_run_whose_world_is_gone_is_one_line(tmp_path):
     run = tmp_path / 'run'
     run.mkdir()
     gone = tmp_path / 'gone.xml'
-    config = TrainConfig(max_episode_steps=15, sim_params={'world': str(gone)})
-    (run / 'config.yaml').write_text(config.to_yaml())
+    config = TrainConfig(max_episode_steps=15, sim_params={'world': 'clutter.xml'})
+    # a run trained in a world that is gone since (a config checks its world when it is built)
+    (run / 'config.yaml').write_text(config.to_yaml().replace('clutter.xml', str(gone)))
     evaluate = executable_path('nav_eval', 'evaluate')
     result = subprocess.run([str(evaluate), str(run), '--sets', 'random_train', '--no-record'],
                             capture_output=True, text=True, timeout=180)

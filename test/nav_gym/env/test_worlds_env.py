@@ -71,9 +71,10 @@ def test_a_dead_sims_failure_is_its_own_error_line(namespace, tmp_path):
         failure = wait_until(process.failure, 60.0, 'the sim exits')
     finally:
         process.stop()
-    assert failure == (f'sim_node exited with code 2: invalid world: world file '
-                       f'{tmp_path}/missing.xml not found: give an existing MJCF file, or the '
-                       'name of a shipped world (arena.xml, clutter.xml, rooms.xml)')
+    assert failure == (f'sim_node (pid {process.process.pid}) exited with code 2: invalid world: '
+                       f'world file {tmp_path}/missing.xml not found: give an existing MJCF '
+                       'file, or the name of a shipped world (arena.xml, clutter.xml, '
+                       'rooms.xml)')
 
 
 def test_validate_names_each_violation_of_a_world_in_one_line(tmp_path):

@@ -127,8 +127,8 @@ def test_a_model_that_cannot_be_read_is_a_clear_error(tmp_path, model, match):
 @pytest.mark.parametrize(('values', 'match'), [
     ({'policy': 'ppo'}, 'policy must be one of'),
     ({'policy': 'dqn'}, 'policy dqn needs a model'),
-    ({'policy': 'servo', 'period': -1.0}, 'period must be a finite number'),
-    ({'policy': 'servo', 'image_timeout': math.inf}, 'image_timeout must be a finite'),
+    ({'policy': 'servo', 'period': -1.0}, 'period must be >= 0, got -1.0'),
+    ({'policy': 'servo', 'image_timeout': math.inf}, 'image_timeout must be >= 0, got inf'),
 ])
 def test_settings_the_node_cannot_run_with_are_refused(values, match):
     with pytest.raises(ConfigError, match=match):

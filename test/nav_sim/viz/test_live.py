@@ -155,7 +155,7 @@ def test_bad_live_ports_are_clear_errors():
     from nav_sim.errors import ConfigError
     from nav_sim.ros.settings import NodeConfig
     from nav_sim.viz.server import LiveViewError
-    with pytest.raises(ConfigError, match='live_port must be 0'):
+    with pytest.raises(ConfigError, match=r'live_port must be in \[0, 65535\], got 70000'):
         NodeConfig(live_port=70000)
     with socket.socket() as taken:
         taken.bind(('127.0.0.1', 0))

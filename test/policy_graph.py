@@ -1,0 +1,72 @@
+"""A camera and a listener around a policy node under test (its tests and the export's)."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import rclpy
+from geometry_msgs.msg import Twist
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.qos import QoSProfile
+from rclpy.signals import SignalHandlerOptions
+from sensor_msgs.msg import Image, JointState
+
+from helpers import wait_until
+from nav_sim import interface
+from nav_sim.ros import qos
+
+DEEP = QoSProfile(depth=100, reliability=qos.DECISIONS.reliability)
+
+
+class Graph:
+    """A camera and a listener: publishes images, collects the policy node's messages.
+
+    ``twists`` are the ``cmd_vel`` messages (of ``cmd_vel_type``), ``received`` the wall-clock
+    time each arrived.
+    """
+
+    def __init__(self, namespace: str, image_topic: str = interface.IMAGE_TOPIC,
+                 cmd_vel_type: type = Twist) -> None:
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
+        self.node = rclpy.create_node('policy_test', namespace=namespace, context=self.context)
+        self.camera = self.node.create_publisher(Image, image_topic, qos.OBSERVATION)
+        self.twists: list[Any] = []
+        self.received: list[float] = []
+        self.decisions: list[JointState] = []
+        self.observations: list[Image] = []
+        self.node.create_subscription(cmd_vel_type, interface.CMD_VEL_TOPIC, self._on_cmd_vel,
+                                      QoSProfile(depth=100))
+        self.node.create_subscription(JointState, interface.DECISION_TOPIC,
+                                      self.decisions.append, DEEP)
+        self.node.create_subscription(Image, interface.POLICY_OBSERVATION_TOPIC,
+                                      self.observations.append, DEEP)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+
+    def _on_cmd_vel(self, msg: Any) -> None:
+        self.twists.append(msg)
+        self.received.append(time.time())
+
+    def spin_until(self, done, timeout: float, what: str, details=None):  # noqa: ANN201
+        def spun():  # noqa: ANN202
+            self.executor.spin_once(timeout_sec=0.02)
+            return done()
+        return wait_until(spun, timeout, what, interval=0, details=details)
+
+    def connected(self, timeout: float = 60.0, details=None) -> None:  # noqa: ANN001
+        """Wait until the policy node is up: it subscribes the camera and publishes decisions."""
+        self.spin_until(lambda: self.camera.get_subscription_count() > 0 and self.decisions,
+                        timeout, 'the policy node', details)
+
+    def publish(self, msg: Image) -> None:
+        self.camera.publish(msg)
+
+    def decision(self, msg: JointState) -> dict[str, float]:
+        return dict(zip(msg.name, msg.position, strict=True))
+
+    def close(self) -> None:
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        self.context.try_shutdown()
