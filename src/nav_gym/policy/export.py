@@ -74,14 +74,14 @@ def export_policy(model: str | Path, out: str | Path | None = None) -> ExportSpe
     try:
         _write_onnx(network, staging / ONNX_FILE)
         write_text(staging / META_FILE, json.dumps(meta, indent=1) + '\n')
-        read_export(staging)  # what the node will check
+        spec = read_export(staging)  # what the node will check
         if target.exists():
             shutil.rmtree(target)
         staging.rename(target)
     except BaseException:
         shutil.rmtree(staging, ignore_errors=True)
         raise
-    return read_export(target)
+    return dataclasses.replace(spec, path=target)
 
 
 def _acting_network(model: Any, checkpoint: Path) -> Any:

@@ -198,9 +198,7 @@ class PolicyNode(Node):
 
     def stop_robot(self) -> None:
         """Publish a zero command and wait (briefly) until its subscribers have it."""
-        if self._repeat_timer is not None:
-            self.destroy_timer(self._repeat_timer)
-            self._repeat_timer = None
+        self._set_repeat_rate(0.0)
         self._command = (0.0, 0.0)
         self._publish_command()
         self.pub_cmd.wait_for_all_acked(Duration(seconds=STOP_ACK_S))

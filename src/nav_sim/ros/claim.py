@@ -98,6 +98,7 @@ class ClaimArbiter:
                 n in self.seen or now - self.heard.get(n, 0.0) >= FRESH_S)]:
             del self.claims[node]  # its client has gone: its claim with it
             self.seen.discard(node)
+            self.heard.pop(node, None)
         self.holder = holder_of(self.claims, live, self.seen, self.heard, now)
         text = json.dumps(self.holder or {})
         if text != self._published:
