@@ -43,6 +43,7 @@ bench: setup
 	$(PY) benchmarks/bench_live.py
 	$(PY) benchmarks/bench_learner.py
 	$(PY) benchmarks/bench_policy.py
+	$(PY) benchmarks/bench_envs.py
 
 lint: setup
 	$(VENV)/bin/ruff check src test benchmarks

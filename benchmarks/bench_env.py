@@ -25,11 +25,13 @@ import os
 import subprocess
 import sys
 import time
+from typing import Any
 
 os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 
+import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
 from nav_gym.env.actions import action_twists  # noqa: E402
@@ -37,9 +39,35 @@ from nav_gym.env.config import EnvConfig  # noqa: E402
 from nav_gym.env.navigation import NavigationEnv  # noqa: E402
 from nav_gym.env.observation import rgb_to_observation  # noqa: E402
 from nav_gym.env.reward import reward_terms
-from nav_gym.training.timing import EnvTimer  # noqa: E402
 from nav_sim.core.kinematics import twist_to_wheels
 from nav_sim.core.sim import NavSim  # noqa: E402
+
+
+class EnvTimer(gym.Wrapper):
+    """Accumulates the seconds spent inside ``reset()`` and ``step()``."""
+
+    def __init__(self, env: gym.Env) -> None:
+        """Wrap ``env`` with zeroed counters."""
+        super().__init__(env)
+        self.env_seconds = 0.0
+        self.env_steps = 0
+
+    def reset(self, **kwargs: Any) -> Any:
+        """Reset the env, timed."""
+        start = time.perf_counter()
+        try:
+            return self.env.reset(**kwargs)
+        finally:
+            self.env_seconds += time.perf_counter() - start
+
+    def step(self, action: Any) -> Any:
+        """Step the env, timed."""
+        start = time.perf_counter()
+        try:
+            return self.env.step(action)
+        finally:
+            self.env_seconds += time.perf_counter() - start
+            self.env_steps += 1
 
 
 def actions(n: int) -> np.ndarray:

@@ -51,16 +51,17 @@ def delete_replay_buffer(run_dir: Path) -> None:
     (folder / REPLAY_BUFFER).unlink(missing_ok=True)
 
 
-def load_model(path: Path, env: Any, device: str, learner: LearnerSpec | None = None) -> Any:
-    """Load a checkpoint to train ``learner`` (timed as :func:`build_model`'s).
+def load_model(path: Path, env: Any, device: str, learner: LearnerSpec | None = None,
+               timing: Any = None) -> Any:
+    """Load a checkpoint to train ``learner`` on ``env``, its work counted into ``timing``.
+
+    ``timing`` is env 0's step budget, as :func:`build_model` times a new learner.
 
     Raises CheckpointError when the file is corrupt or incompatible.
     """
     from nav_gym.training.learner import load_checkpoint  # torch: after quiet_learner_threads()
     try:
-        return load_checkpoint(path, learner or LearnerSpec(),
-                               env.unwrapped.timing if env is not None else None, env=env,
-                               device=device)
+        return load_checkpoint(path, learner or LearnerSpec(), timing, env=env, device=device)
     except (zipfile.BadZipFile, EOFError, KeyError, ValueError, RuntimeError, OSError,
             AssertionError) as exc:
         raise CheckpointError(
@@ -76,7 +77,9 @@ def make_callback(config: TrainConfig, run_dir: Path) -> Any:
         """CheckpointCallback with atomic writes and the latest replay buffer."""
 
         def _on_step(self) -> bool:
-            if self.num_timesteps % config.checkpoint_freq == 0:
+            # N envs add N steps per call: save when a multiple of checkpoint_freq is passed
+            steps, added = self.num_timesteps, self.training_env.num_envs
+            if steps // config.checkpoint_freq > (steps - added) // config.checkpoint_freq:
                 path = save_checkpoint(self.model, run_dir, config.save_replay_buffer)
                 print(f'checkpoint: {path}', flush=True)
             return True

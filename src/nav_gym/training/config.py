@@ -11,6 +11,7 @@ import argparse
 import dataclasses
 import re
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -34,12 +35,28 @@ from nav_sim.errors import ConfigError
 from nav_sim.paths import plain_name_problem
 from nav_sim.ros.process import typed_params
 
+#: the most parallel sims a run may ask for (each is a process with its own renderer)
+MAX_ENVS = 64
 _ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
 #: the torch devices a run may name
 DEVICE = re.compile(r'auto|cpu|cuda(:\d+)?')
 #: the components' flags (LearnerSpec fields), each with its value that turns the component off
 COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0,
               'prioritized_replay': False}
+
+
+def vector_schedule(train_freq: int, gradient_steps: int, n_envs: int) -> tuple[int, int]:
+    """Return SB3's ``(train_freq, gradient_steps)`` that keep the replay ratio with N envs.
+
+    SB3 counts ``train_freq`` in vector steps (N env steps each).  The ratio of gradient steps
+    to env steps, ``gradient_steps / train_freq``, stays the configured one: with the default
+    1/4, two envs update once every 2 vector steps, four envs once every step, eight envs twice
+    every step.  One env keeps the configured pair as it is.
+    """
+    if n_envs == 1:
+        return train_freq, gradient_steps
+    per_vector_step = Fraction(gradient_steps, train_freq) * n_envs
+    return per_vector_step.denominator, per_vector_step.numerator
 
 
 def _env(name: str) -> Any:
@@ -139,6 +156,10 @@ class TrainConfig:
     exploration_final_eps: float = setting(0.05, 'final epsilon', FRACTION)
     seed: int = setting(9, 'seed of DQN, the env and its scenario sequence',
                         Bounds(0, 2**32 - 1))
+    n_envs: int = setting(1, 'sims trained on at once, each its own process and namespace, '
+                          'stepped concurrently (1: the workshop protocol; every env has its '
+                          'own scenario stream; the replay ratio train_freq:gradient_steps is '
+                          'kept per env step)', Bounds(1, MAX_ENVS))
     double_q: bool = _learner('double_q')
     n_steps: int = _learner('n_steps')
     dueling: bool = _learner('dueling')
@@ -194,6 +215,12 @@ class TrainConfig:
             if problem:
                 raise TrainConfigError(problem)
         self.learner()  # the learner's own checks
+        if self.n_envs > 1 and self.prioritized_replay:
+            raise TrainConfigError('prioritized_replay supports n_envs 1 only, got n_envs '
+                                   f'{self.n_envs}')
+        if self.n_envs > 1 and self.sim == 'attach':
+            raise TrainConfigError(f"n_envs {self.n_envs} starts a sim per env: sim must be "
+                                   "'auto' or 'embedded', not 'attach'")
         # the env's checks, and its resolved values (sim_params {}, the world's episode limit)
         env = EnvConfig(**{name: getattr(self, name) for name in _ENV_FIELDS})
         object.__setattr__(self, 'sim_params', env.sim_params)
@@ -218,7 +245,22 @@ class TrainConfig:
                 'train_freq', 'gradient_steps', 'target_update_interval',
                 'exploration_fraction', 'exploration_initial_eps', 'exploration_final_eps',
                 'seed', 'device')
-        return {k: getattr(self, k) for k in keys}
+        kwargs = {k: getattr(self, k) for k in keys}
+        kwargs['train_freq'], kwargs['gradient_steps'] = vector_schedule(
+            self.train_freq, self.gradient_steps, self.n_envs)
+        return kwargs
+
+    def env_configs(self) -> list[EnvConfig]:
+        """Return the EnvConfig of each of the ``n_envs`` envs (:meth:`env_config` for one).
+
+        With more than one, env ``i`` starts its own sim ('embedded') in the namespace
+        ``<namespace>/env<i>``, or in a fresh unique one when ``namespace`` is ''.
+        """
+        if self.n_envs == 1:
+            return [self.env_config()]
+        return [self.env_config(sim='embedded',
+                                namespace=f'{self.namespace}/env{i}' if self.namespace else '')
+                for i in range(self.n_envs)]
 
     def with_full_sim_params(self) -> TrainConfig:
         """Return this config with every simulation parameter spelled out in ``sim_params``.

@@ -1,40 +1,9 @@
-"""Measure how much wall-clock time the environment takes (vs. the learner)."""
+"""The learner's OpenMP threads: passive waits, so that they leave the CPU to the sim."""
 
 from __future__ import annotations
 
 import os
 import sys
-import time
-from typing import Any
-
-import gymnasium as gym
-
-
-class EnvTimer(gym.Wrapper):
-    """Accumulates the seconds spent inside ``reset()`` and ``step()``."""
-
-    def __init__(self, env: gym.Env) -> None:
-        """Wrap ``env`` with zeroed counters."""
-        super().__init__(env)
-        self.env_seconds = 0.0
-        self.env_steps = 0
-
-    def reset(self, **kwargs: Any) -> Any:
-        """Reset the env, timed."""
-        start = time.perf_counter()
-        try:
-            return self.env.reset(**kwargs)
-        finally:
-            self.env_seconds += time.perf_counter() - start
-
-    def step(self, action: Any) -> Any:
-        """Step the env, timed."""
-        start = time.perf_counter()
-        try:
-            return self.env.step(action)
-        finally:
-            self.env_seconds += time.perf_counter() - start
-            self.env_steps += 1
 
 
 def quiet_learner_threads() -> str:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import json
 import os
 import sys
@@ -40,7 +41,6 @@ from nav_gym.training.run_dir import (
     checkpoints,
     load_config,
 )
-from nav_gym.training.timing import EnvTimer
 from nav_sim.errors import NavSimError, describe_exception
 from nav_sim.viz.options import add_live_argument
 
@@ -60,15 +60,26 @@ def new_run_dir(config: TrainConfig) -> Path:
     return run_dir
 
 
-def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> tuple[Any, EnvTimer]:
-    """Return ``Monitor(EnvTimer(NavigationEnv))`` writing the run's monitor.csv."""
-    from stable_baselines3.common.monitor import Monitor
+def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> Any:
+    """Return the run's ``n_envs`` envs: ``ParallelEnvs`` of ``Monitor(NavigationEnv)``.
+
+    Their episodes all go to the run's one monitor.csv (a resumed run appends to it).
+    """
+    # torch (SB3's VecEnv): after quiet_learner_threads()
+    from nav_gym.training.parallel import MonitorFile, ParallelEnvs
     monitor_file = run_dir / MONITOR
-    timer = EnvTimer(NavigationEnv(config.env_config()))
-    # a resumed run appends to its Monitor CSV (SB3 writes the header only for a new file)
-    env = Monitor(timer, str(monitor_file), info_keywords=('is_success', 'event'),
-                  override_existing=not (resume and monitor_file.exists()))
-    return env, timer
+    writer = MonitorFile(str(monitor_file), resume and monitor_file.exists(),
+                         ('is_success', 'event'))
+    try:
+        return ParallelEnvs([functools.partial(_monitored_env, writer, env_config)
+                             for env_config in config.env_configs()])
+    except BaseException:
+        writer.close()
+        raise
+
+
+def _monitored_env(writer: Any, env_config: Any) -> Any:
+    return writer.monitor(NavigationEnv(env_config))
 
 
 def build_model(config: TrainConfig, run_dir: Path, env: Any, resume: bool) -> Any:
@@ -78,14 +89,14 @@ def build_model(config: TrainConfig, run_dir: Path, env: Any, resume: bool) -> A
         from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy
         learner = config.learner()
         # the learner's share of every env step is counted into the env's step budget
-        return learner_class(env.unwrapped.timing, learner)(
+        return learner_class(env.first.timing, learner)(
             learner_policy(learner), env, tensorboard_log=str(run_dir / TENSORBOARD), verbose=0,
             **config.dqn_kwargs(), **learner_kwargs(learner, config.gamma))
     found = checkpoints(run_dir)
     if not found:
         raise CheckpointError(f'no checkpoint in {run_dir / CHECKPOINTS} to resume from')
     steps, path = found[-1]
-    model = load_model(path, env, config.device, config.learner())
+    model = load_model(path, env, config.device, config.learner(), env.first.timing)
     model.tensorboard_log = str(run_dir / TENSORBOARD)
     buffer = run_dir / CHECKPOINTS / REPLAY_BUFFER
     buffer_step = replay_buffer_step(run_dir / CHECKPOINTS / REPLAY_BUFFER_STEP)
@@ -133,9 +144,9 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, hint: str,
     env = None
     start = time.perf_counter()
     try:
-        env, timer = build_env(config, run_dir, resume)
-        if live_port:  # --live: this process serves the Foxglove live view
-            print(f'live view: open {env.unwrapped.start_live(live_port)} in Foxglove', flush=True)
+        env = build_env(config, run_dir, resume)
+        if live_port:  # --live: this process serves the Foxglove live view (of env 0)
+            print(f'live view: open {env.first.start_live(live_port)} in Foxglove', flush=True)
         model = build_model(config, run_dir, env, resume)
         steps_before = model.num_timesteps
         if not resume:
@@ -144,18 +155,18 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, hint: str,
         try:
             model.learn(max(config.total_timesteps - steps_before, 0),
                         callback=[make_callback(config, run_dir),
-                                  training_callback(env.unwrapped)],
+                                  training_callback(env.first)],
                         reset_num_timesteps=not resume,
                         tb_log_name='dqn', progress_bar=sys.stdout.isatty())
             outcome = 'finished'
         except KeyboardInterrupt:
             outcome = 'interrupted'
         except NavSimError as exc:  # the sim died or stopped answering
-            outcome, failure = 'sim failed', _sim_failure(timer, exc)
+            outcome, failure = 'sim failed', _sim_failure(env, exc)
         except Exception as exc:  # noqa: BLE001 - a library's error: keep what was learned
             outcome, failure, error = 'failed', f'unexpected {describe_exception(exc)}', exc
         summary = _summary(config, run_dir, resume, outcome, model, steps_before,
-                           time.perf_counter() - start, timer, env)
+                           time.perf_counter() - start, env)
         saved: list[str] = []
         try:
             path = _save(model, config, run_dir, summary, saved)
@@ -190,15 +201,19 @@ def config_and_run_dir(config_file: str | None, overrides: dict[str, Any],
     """
     if resume:
         run_dir = Path(resume)
-        base = dataclasses.asdict(load_config(run_dir))
-        return train_config.build(config_file, overrides, base), run_dir
+        saved = load_config(run_dir)
+        config = train_config.build(config_file, overrides, dataclasses.asdict(saved))
+        if config.n_envs != saved.n_envs:  # its replay buffer and schedule are per env
+            raise TrainConfigError(f'{run_dir} was trained with n_envs {saved.n_envs} and '
+                                   f'resumes with it, not {config.n_envs}')
+        return config, run_dir
     config = train_config.build(config_file, overrides)
     return config, new_run_dir(config)
 
 
-def _sim_failure(timer: EnvTimer, exc: NavSimError) -> str:
+def _sim_failure(env: Any, exc: NavSimError) -> str:
     """Say what happened to the sim: the embedded one's exit code and log tail, if it died."""
-    died = timer.unwrapped.sim_failure()
+    died = env.sim_failure()
     if died is not None:
         return f'the embedded sim died ({died})'
     return f'the sim stopped answering ({exc})'
@@ -232,7 +247,7 @@ def _save(model: Any, config: TrainConfig, run_dir: Path, summary: dict[str, Any
 
 
 def _summary(config: TrainConfig, run_dir: Path, resume: bool, outcome: str, model: Any,
-             steps_before: int, wall: float, timer: EnvTimer, env: Any) -> dict[str, Any]:
+             steps_before: int, wall: float, env: Any) -> dict[str, Any]:
     steps = model.num_timesteps - steps_before
     return {
         'run_dir': str(run_dir), 'interrupted': outcome != 'finished', 'outcome': outcome,
@@ -240,12 +255,14 @@ def _summary(config: TrainConfig, run_dir: Path, resume: bool, outcome: str, mod
         'num_timesteps': model.num_timesteps, 'steps_this_session': steps,
         'wall_clock_s': round(wall, 2),
         'steps_per_s': round(steps / wall, 2) if wall > 0 else None,
-        'env_time_s': round(timer.env_seconds, 2),
-        'env_share': round(timer.env_seconds / wall, 4) if wall > 0 else None,
+        'n_envs': env.num_envs,
+        'env_time_s': round(env.env_seconds, 2),
+        'env_share': round(env.env_seconds / wall, 4) if wall > 0 else None,
         'omp_wait_policy': os.environ.get('OMP_WAIT_POLICY', 'default'),
-        'episodes': len(env.get_episode_rewards()),
-        # mean ms per step: env phases, the learner's share, the sim's period (/diagnostics)
-        'time_budget': env.unwrapped.time_budget(),
+        'episodes': env.episode_count(),
+        # mean ms per step of env 0: env phases, the learner's share (per vector step), the
+        # sim's period (/diagnostics)
+        'time_budget': env.first.time_budget(),
         'config': dataclasses.asdict(config),
     }
 
