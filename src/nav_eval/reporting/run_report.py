@@ -56,8 +56,8 @@ HYPERPARAMETERS = ('double_q', 'n_steps', 'dueling', 'augment_shift', 'prioritiz
                    'priority_alpha', 'priority_beta', 'learning_rate', 'buffer_size',
                    'learning_starts', 'batch_size', 'gamma', 'train_freq', 'gradient_steps',
                    'target_update_interval', 'exploration_fraction', 'exploration_initial_eps',
-                   'exploration_final_eps', 'seed', 'split', 'max_episode_steps', 'forward_speed',
-                   'turn_rate', 'turn_speed', 'sim_params')
+                   'exploration_final_eps', 'seed', 'n_envs', 'split', 'max_episode_steps',
+                   'forward_speed', 'turn_rate', 'turn_speed', 'sim_params')
 EVAL_COLUMNS = ('Set', 'Policy', 'Split', 'Episodes', 'Success rate', 'Collision rate',
                 'Timeout rate', 'Mean length', 'Mean SPL', 'Mean return')
 

@@ -208,7 +208,9 @@ class SimClient:
         """Return the first frame satisfying ``predicate``.
 
         Raises after ``self.timeout`` s, or returns None after ``limit`` s if one is given (the
-        caller may then retry).
+        caller may then retry); either only after a last look of up to ``POLL_S``, so that a
+        client stopped past its deadline (SIGSTOP, a suspended laptop, a loaded machine) still
+        takes a frame that is on its way.
         """
         def arrived() -> bool:
             return self._latest is not None and predicate(self._latest)
@@ -223,6 +225,9 @@ class SimClient:
                 raise SimUnavailableError(
                     f'nav_sim in {self.where} is gone (no camera publisher) while waiting for '
                     f'{what}; restart it with `ros2 run nav_sim sim_node`')
+        grace = time.monotonic() + POLL_S  # a last look: this process may have slept past
+        while not arrived() and grace > time.monotonic():  # its deadline (SIGSTOP, suspend)
+            self._take_observations(max(grace - time.monotonic(), 0.0))
         if not arrived():
             if limit is not None:
                 return None

@@ -248,3 +248,23 @@ def test_a_lost_service_response_is_asked_for_again_until_the_time_out(namespace
         # at least the 1 s time-out, about 1.0 s: 4 s more is the margin for a loaded machine
         assert 1.0 <= time.monotonic() - start_time < 5.0
         assert len(never.sent) >= 5 and never.removed == never.sent
+
+
+def test_a_client_that_slept_past_its_deadline_still_takes_the_frame(namespace, monkeypatch):
+    """A client stopped past its deadline (SIGSTOP, a suspend) takes a last look, no error."""
+    import nav_sim.ros.client as client_module
+
+    with SimProcess(namespace), SimClient(namespace, timeout=15.0) as client:
+        client.wait_for_sim()
+        frame, _ = client.reset(seed=101, split='train')
+        real = time.monotonic
+        calls = []
+
+        def slept() -> float:  # every clock reading after the first is past the deadline
+            calls.append(1)
+            return real() + (0.0 if len(calls) == 1 else 60.0)
+
+        monkeypatch.setattr(client_module.time, 'monotonic', slept)
+        after = client.step(0.0, 1.0, frame)
+        monkeypatch.setattr(client_module.time, 'monotonic', real)
+        assert after.period == frame.period + 1 and len(calls) > 1
