@@ -1,10 +1,9 @@
 """A lockstep client of the ``nav_sim`` node: publish ``cmd_vel``, receive the period's messages.
 
-Used by the Gymnasium env, the evaluation tools, the demo, the tests and the benchmark.  It runs
-its own rclpy context and spins its ``SingleThreadedExecutor`` in the calling thread while it
-waits (no thread hand-over on the lockstep hot path), so it can be created and closed many times
-in one process.  Every wait is bounded: if the sim does not answer, or disappears mid-episode, a
-:class:`SimUnavailableError` says what to start.
+Used by the env, the evaluation tools, the demo, the tests and the benchmark.  It runs its own
+rclpy context and spins its ``SingleThreadedExecutor`` in the calling thread while it waits (no
+thread hand-over on the hot path), so it can be created and closed many times in a process.
+Every wait is bounded: a sim that does not answer, or is gone, is a SimUnavailableError.
 """
 
 from __future__ import annotations
@@ -208,9 +207,7 @@ class SimClient:
         """Return the first frame satisfying ``predicate``.
 
         Raises after ``self.timeout`` s, or returns None after ``limit`` s if one is given (the
-        caller may then retry); either only after a last look of up to ``POLL_S``, so that a
-        client stopped past its deadline (SIGSTOP, a suspended laptop, a loaded machine) still
-        takes a frame that is on its way.
+        caller may then retry), each after a last look of up to ``POLL_S``.
         """
         def arrived() -> bool:
             return self._latest is not None and predicate(self._latest)
@@ -226,7 +223,7 @@ class SimClient:
                     f'nav_sim in {self.where} is gone (no camera publisher) while waiting for '
                     f'{what}; restart it with `ros2 run nav_sim sim_node`')
         grace = time.monotonic() + POLL_S  # a last look: this process may have slept past
-        while not arrived() and grace > time.monotonic():  # its deadline (SIGSTOP, suspend)
+        while not arrived() and grace > time.monotonic():  # its deadline (SIGSTOP, a suspend)
             self._take_observations(max(grace - time.monotonic(), 0.0))
         if not arrived():
             if limit is not None:
