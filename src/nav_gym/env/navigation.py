@@ -112,7 +112,7 @@ class NavigationEnv(gym.Env):
                     raise
         except BaseException:
             client.close()
-            self._stop_sim()
+            self.stop_sim()
             raise
         self._client = client
 
@@ -288,7 +288,7 @@ class NavigationEnv(gym.Env):
         if self._client is not None:
             self._client.close()
             self._client = None
-        self._stop_sim()
+        self.stop_sim()
         super().close()
 
     # --- helpers --------------------------------------------------------------------------
@@ -319,7 +319,8 @@ class NavigationEnv(gym.Env):
                                      '1 forward, 2 right')
         return int(value)
 
-    def _stop_sim(self) -> None:
+    def stop_sim(self) -> None:
+        """Stop the sim this env started (nothing if it attached); safe from another thread."""
         if self._sim_process is not None:
             self._sim_process.stop()
             self._sim_process = None
@@ -327,7 +328,7 @@ class NavigationEnv(gym.Env):
     def __del__(self) -> None:  # never leave a sim process behind
         """Stop a sim this env started, ignoring any error."""
         try:
-            self._stop_sim()
+            self.stop_sim()
         except Exception:
             pass
 

@@ -32,7 +32,8 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 
 #: env i > 0 draws its seed with this bit set: a run's own seed (< 2**32) never has it
 DERIVED_SEED_BIT = 1 << 62
-#: seconds a stopped vector step waits for the other envs' steps to end before closing
+#: seconds a stopped vector step or build waits for the other envs to end theirs (the trainer
+#: passes more when the envs' sim_timeout asks for it: ParallelEnvs(settle_seconds=...))
 SETTLE_SECONDS = 30.0
 
 
@@ -52,15 +53,18 @@ def env_seeds(seed: int | None, n_envs: int) -> list[int]:
 
 
 def _build_all(env_fns: Sequence[Callable[[], gym.Env]],
-               pool: concurrent.futures.ThreadPoolExecutor | None) -> list[gym.Env]:
+               pool: concurrent.futures.ThreadPoolExecutor | None,
+               settle_seconds: float) -> list[gym.Env]:
     """Call every builder (in ``pool``'s threads when given); close what was built on failure."""
     if pool is None:
         return [make() for make in env_fns]
-    futures = [pool.submit(make) for make in env_fns]
+    futures = []
     try:
+        for make in env_fns:
+            futures.append(pool.submit(make))
         return [future.result() for future in futures]
     except BaseException:
-        concurrent.futures.wait(futures, timeout=SETTLE_SECONDS)
+        concurrent.futures.wait(futures, timeout=settle_seconds)
         for future in futures:
             if future.done() and future.exception() is None:
                 future.result().close()
@@ -105,17 +109,29 @@ class ParallelEnvs(DummyVecEnv):
     and why a sim died.
     """
 
-    def __init__(self, env_fns: Sequence[Callable[[], gym.Env]]) -> None:
-        """Build the envs at the same time (each starts its sim); on any failure close them all."""
+    def __init__(self, env_fns: Sequence[Callable[[], gym.Env]],
+                 settle_seconds: float = SETTLE_SECONDS) -> None:
+        """Build the envs at the same time (each starts its sim); on any failure close them all.
+
+        ``settle_seconds``: how long a stopped step or build may take to end (more than the
+        envs' own time-outs) before the envs are closed around it.
+        """
         pool = None
         if len(env_fns) > 1:
             pool = concurrent.futures.ThreadPoolExecutor(len(env_fns), 'visnav_env')
-        envs = _build_all(env_fns, pool)
-        super().__init__([lambda env=env: env for env in envs])
+        envs = _build_all(env_fns, pool, settle_seconds)
+        try:
+            super().__init__([lambda env=env: env for env in envs])
+        except BaseException:
+            for env in envs:
+                env.close()
+            raise
         self.env_seconds = 0.0
+        self.settle_seconds = settle_seconds
         self._started = 0.0
         self._pool = pool
-        self._pending: list[concurrent.futures.Future] = []
+        #: the steps under way, by env index: close() never closes an env under its step
+        self._pending: dict[int, concurrent.futures.Future] = {}
 
     @property
     def first(self) -> Any:
@@ -140,22 +156,22 @@ class ParallelEnvs(DummyVecEnv):
         self.actions = actions
         self._started = time.perf_counter()
         if self._pool is not None:
-            self._pending = [self._pool.submit(self._step_env, index, actions[index])
-                             for index in range(self.num_envs)]
+            for index in range(self.num_envs):  # each kept at once: close() waits for it
+                self._pending[index] = self._pool.submit(self._step_env, index, actions[index])
 
     def step_wait(self) -> Any:
         """Collect the N steps (an ended episode's env is reset, as DummyVecEnv does)."""
         try:
             if self._pool is None:
                 return super().step_wait()
-            pending, self._pending = self._pending, []
             try:
-                results = [future.result() for future in pending]
+                results = [self._pending[index].result() for index in range(self.num_envs)]
             except BaseException:
                 # Ctrl-C, or one env failed: let the others end their step before anything
                 # closes the envs under them (a sim that is gone times out in sim_timeout)
-                concurrent.futures.wait(pending, timeout=SETTLE_SECONDS)
+                self._settle()
                 raise
+            self._pending = {}
             for index, (obs, reward, done, info) in enumerate(results):
                 self.buf_rews[index], self.buf_dones[index] = reward, done
                 self.buf_infos[index] = info
@@ -188,10 +204,25 @@ class ParallelEnvs(DummyVecEnv):
                 return failure if self.num_envs == 1 else f'env {index}: {failure}'
         return None
 
+    def _settle(self) -> None:
+        """Wait up to ``settle_seconds`` for the steps under way; forget those that ended."""
+        concurrent.futures.wait(list(self._pending.values()), timeout=self.settle_seconds)
+        self._pending = {i: f for i, f in self._pending.items() if not f.done()}
+
     def close(self) -> None:
-        """Stop the threads, then every env and the sim it started."""
+        """Close every env and the sim it started, then stop the threads.
+
+        An env whose step is still under way after ``settle_seconds`` only has its sim stopped
+        (its step then fails at once and its thread ends): its client is never closed under it.
+        The threads stop last: a sim started from a thread is also stopped when that thread
+        exits (``SimProcess``'s parent-death signal).
+        """
+        self._settle()
+        for index, env in enumerate(self.envs):
+            if index in self._pending:
+                env.unwrapped.stop_sim()
+            else:
+                env.close()
         if self._pool is not None:
-            concurrent.futures.wait(self._pending, timeout=SETTLE_SECONDS)
             self._pool.shutdown(wait=False, cancel_futures=True)
             self._pool = None
-        super().close()

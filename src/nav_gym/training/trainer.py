@@ -66,13 +66,15 @@ def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> Any:
     Their episodes all go to the run's one monitor.csv (a resumed run appends to it).
     """
     # torch (SB3's VecEnv): after quiet_learner_threads()
-    from nav_gym.training.parallel import MonitorFile, ParallelEnvs
+    from nav_gym.training.parallel import SETTLE_SECONDS, MonitorFile, ParallelEnvs
     monitor_file = run_dir / MONITOR
     writer = MonitorFile(str(monitor_file), resume and monitor_file.exists(),
                          ('is_success', 'event'))
+    # a step that ends an episode waits on up to about five sim requests (stop, reset, ...)
+    settle = max(SETTLE_SECONDS, 6 * config.sim_timeout)
     try:
         return ParallelEnvs([functools.partial(_monitored_env, writer, env_config)
-                             for env_config in config.env_configs()])
+                             for env_config in config.env_configs()], settle)
     except BaseException:
         writer.close()
         raise

@@ -121,6 +121,33 @@ def test_a_failed_env_step_raises_after_the_others_end_their_step():
     envs.close()
 
 
+def test_close_never_closes_an_env_under_a_step_still_under_way():
+    release = threading.Event()
+
+    class Stuck(ScenarioEnv):
+        closed = stopped = False
+
+        def step(self, action):
+            release.wait(timeout=20)
+            return super().step(action)
+
+        def close(self):
+            self.closed = True
+
+        def stop_sim(self):
+            self.stopped = True
+
+    envs = ParallelEnvs([Stuck, Stuck], settle_seconds=0.2)
+    envs.reset()
+    envs.step_async(np.array([1, 1]))
+    envs.close()  # the steps outlast the settle time: only their sims are stopped
+    assert all(env.stopped and not env.closed for env in envs.envs)
+    release.set()
+    idle = ParallelEnvs([Stuck, Stuck], settle_seconds=0.2)
+    idle.close()
+    assert all(env.closed and not env.stopped for env in idle.envs)
+
+
 def test_a_failed_env_build_closes_the_envs_already_built():
     closed = []
 
