@@ -1,7 +1,7 @@
 """Train and evaluate several seeds of one or more configurations on Ray Tune, then aggregate.
 
     ros2 run nav_eval sweep [--seeds 1-5] [--grid KEY=V1,V2 ...] [--set KEY=V ...]
-                            [--total-timesteps N] [--cpus-per-trial 2] [--gpus-per-trial 0]
+                            [--total-timesteps N] [--cpus-per-trial C] [--gpus-per-trial 0]
                             [--address auto|HOST:PORT] [--storage DIR] [--name NAME]
     ros2 run nav_eval sweep --resume SWEEP_DIR      # continue an interrupted sweep
     ros2 run nav_eval sweep --aggregate DIR         # statistics of finished trials only
@@ -55,7 +55,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help='skip the random policy and servo on both banks')
     parser.add_argument('--record', action='store_true', help='write MCAP bags of the final '
                         'evaluation (large: 200 episodes per trial)')
-    parser.add_argument('--cpus-per-trial', type=float, default=2)
+    parser.add_argument('--cpus-per-trial', type=float, help='CPUs each trial gets (default '
+                        '2, or n_envs + 1 where --set or --grid gives n_envs: a sim per env and '
+                        'the learner)')
     parser.add_argument('--gpus-per-trial', type=float, default=0,
                         help='> 0: the trial trains on cuda')
     parser.add_argument('--address', help="attach to a Ray cluster ('auto' or HOST:PORT); "
@@ -82,8 +84,10 @@ def main(argv: list[str] | None = None) -> None:
         check_cluster(args.address)  # within seconds, before anything is written
         if args.resume:
             spec = load_spec(args.resume)
-            if args.cpus_per_trial != 2 or args.gpus_per_trial != 0:
-                spec.cpus_per_trial, spec.gpus_per_trial = args.cpus_per_trial, args.gpus_per_trial
+            if args.cpus_per_trial is not None:  # else the sweep's own
+                spec.cpus_per_trial = args.cpus_per_trial
+            if args.gpus_per_trial != 0:
+                spec.gpus_per_trial = args.gpus_per_trial
             return run_sweep(spec, args.address, resume=True, retry_failed=args.retry_failed)
         return run_sweep(spec_from_args(args), args.address, resume=False)
 

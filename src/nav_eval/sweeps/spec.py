@@ -191,6 +191,21 @@ def load_spec(sweep_dir: Path) -> SweepSpec:
     return SweepSpec(**data)
 
 
+def trial_cpus(fixed: dict[str, str], grid: dict[str, list[str]]) -> float:
+    """Return the CPUs a trial gets unless ``--cpus-per-trial`` says.
+
+    SweepSpec's default (2), or one per sim and one for the learner, ``n_envs + 1``, for the
+    largest ``n_envs`` that ``--set`` or ``--grid`` gives.  A value that is not a number is left
+    to the settings' own check, which names it.
+    """
+    values = [fixed['n_envs']] if 'n_envs' in fixed else grid.get('n_envs', [])
+    try:
+        most = max((int(float(value)) for value in values), default=1)
+    except ValueError:
+        most = 1
+    return float(max(SweepSpec.cpus_per_trial, most + 1))
+
+
 def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     """Build the spec of a new sweep from the command line and create its directory."""
     fixed = parse_assignments(args.set or [], multi=False)
@@ -223,11 +238,12 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
                        args.many_episodes)
     except EvaluationError as exc:
         raise SweepError(str(exc)) from None
-    if args.cpus_per_trial < 1 or args.gpus_per_trial < 0:
+    cpus = args.cpus_per_trial if args.cpus_per_trial is not None else trial_cpus(fixed, grid)
+    if cpus < 1 or args.gpus_per_trial < 0:
         raise SweepError('--cpus-per-trial must be >= 1 and --gpus-per-trial >= 0')
     spec = SweepSpec(str(sweep_dir), seeds['seeds'], grid, fixed, seeds['train_seeds'],
                      seeds['heldout_seeds'], curve, not args.no_baselines, args.record,
-                     args.cpus_per_trial, args.gpus_per_trial, NAMING)
+                     cpus, args.gpus_per_trial, NAMING)
     write_configs(spec)  # creates the sweep directory once every grid point is valid
     data = dataclasses.asdict(spec)
     data.pop('sweep_dir')

@@ -362,3 +362,12 @@ def test_a_trial_child_evaluates_only_after_a_finished_training(monkeypatch, exi
     monkeypatch.setattr(sweep_trial, 'evaluate_trial', lambda trial: calls.append(('evaluate',)))
     assert sweep_trial.train_and_evaluate({'name': 'seed1'}) == returned
     assert calls == [('train', '1')] + ([('evaluate',)] if evaluated else [])
+
+
+def test_a_trial_gets_a_cpu_per_sim_and_one_for_the_learner_unless_told():
+    from nav_eval.sweeps.spec import SweepSpec, trial_cpus
+    assert trial_cpus({}, {}) == SweepSpec.cpus_per_trial == 2
+    assert trial_cpus({'n_envs': '4'}, {}) == 5
+    assert trial_cpus({}, {'n_envs': ['1', '8', '2']}) == 9
+    assert trial_cpus({'n_envs': '1'}, {}) == 2
+    assert trial_cpus({'n_envs': 'many'}, {}) == 2  # the settings' check names the bad value
