@@ -1,0 +1,112 @@
+"""The frame-stack learner on SB3: the agent's stacks, and the replay buffer that rebuilds them."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium import spaces
+from stable_baselines3 import DQN
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from nav_gym.training.memory import FrameStackEnv, FrameStackReplayBuffer
+
+
+class Counter(gym.Env):
+    """Frames that name their env and time step; episodes of 1-5 steps (ends and time-outs)."""
+
+    observation_space = spaces.Box(0, 255, (3, 4, 4), np.uint8)
+    action_space = spaces.Discrete(3)
+
+    def __init__(self, tag: int) -> None:
+        self.tag, self.t, self.left = tag, 0, 0
+        self.rng = np.random.default_rng(tag)
+
+    def _frame(self) -> np.ndarray:
+        self.t += 1
+        frame = np.zeros((3, 4, 4), np.uint8)
+        frame[0], frame[1], frame[2] = self.tag, self.t % 256, self.t // 256
+        return frame
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        self.left = int(self.rng.integers(1, 6))
+        return self._frame(), {}
+
+    def step(self, action):
+        self.left -= 1
+        ended = self.left == 0
+        terminated = ended and self.t % 2 == 0
+        return self._frame(), 1.0, terminated, ended and not terminated, {}
+
+
+def frame_time(frame: np.ndarray) -> int:
+    """Return the time step a Counter frame names."""
+    return int(frame[1, 0, 0]) + 256 * int(frame[2, 0, 0])
+
+
+def test_the_agent_stacks_its_frames_and_begins_afresh_at_each_episode():
+    envs = FrameStackEnv(DummyVecEnv([lambda: Counter(1)]), 3)
+    first = envs.reset()[0]
+    assert first.shape == (9, 4, 4) and [first[c, 0, 0] for c in (1, 4, 7)] == [1, 1, 1]
+    for _ in range(20):
+        obs, _, dones, infos = envs.step(np.array([1]))
+        if dones[0]:
+            terminal = infos[0]['terminal_observation']
+            assert terminal.shape == (9, 4, 4)
+            # the new episode's first frame stands in for the frames before it
+            assert obs[0][1, 0, 0] == obs[0][4, 0, 0] == obs[0][7, 0, 0]
+            assert terminal[7, 0, 0] != obs[0][7, 0, 0]
+
+
+@pytest.mark.parametrize('k', [1, 4])
+def test_the_buffer_keeps_single_frames_and_samples_the_stacks_added(k):
+    n_envs, size = 2, 40
+    envs = FrameStackEnv(DummyVecEnv([lambda i=i: Counter(i + 1) for i in range(n_envs)]), k)
+    buffer = FrameStackReplayBuffer(size, envs.observation_space, envs.action_space,
+                                    device='cpu', n_envs=n_envs, frame_stack=k, n_steps=1)
+    assert buffer.observations.frames.shape == (size // n_envs, n_envs, 3, 4, 4)
+    rows = size // n_envs
+    added = {}  # (position, env) -> (stacked obs, stacked next obs) of the newest writes
+    stored = [{} for _ in range(n_envs)]  # per env: a frame's time -> the step it was stored
+    obs = envs.reset()
+    for step in range(3 * rows + 5):  # wraps the buffer three times
+        actions = np.array([1] * n_envs)
+        nxt, rewards, dones, infos = envs.step(actions)
+        real_next = nxt.copy()
+        for e in range(n_envs):
+            if dones[e]:
+                real_next[e] = infos[e]['terminal_observation']
+        position = buffer.pos
+        buffer.add(obs, real_next, actions, rewards, dones, infos)
+        for e in range(n_envs):
+            added[(position, e)] = (obs[e].copy(), real_next[e].copy(), step)
+            stored[e][frame_time(obs[e][-3:])] = step  # the vector step a frame was stored at
+        obs = nxt
+    newest_step = 3 * rows + 4
+    checked = 0
+    for (position, e), (stacked, stacked_next, _) in added.items():
+        got = buffer.observations[np.array([position]), np.array([e])][0]
+        got_next = buffer.next_observations[np.array([position]), np.array([e])][0]
+        assert np.array_equal(got_next[-3:], stacked_next[-3:])
+        # every frame of the stack still kept: the stacks acting saw
+        if stored[e][frame_time(stacked[:3])] >= newest_step - rows + 1:
+            assert np.array_equal(got, stacked), (position, e)
+            assert np.array_equal(got_next, stacked_next), (position, e)
+            checked += 1
+    assert checked > rows  # most positions are checked
+    samples = buffer.sample(8)
+    assert samples.observations.shape == (8, 3 * k, 4, 4)
+    assert samples.next_observations.shape == (8, 3 * k, 4, 4)
+
+
+def test_a_dqn_trains_on_stacks_with_a_single_frame_buffer(spaces_only):
+    envs = FrameStackEnv(DummyVecEnv([spaces_only]), 4)
+    model = DQN('CnnPolicy', envs, buffer_size=200, learning_starts=40, batch_size=8,
+                replay_buffer_class=FrameStackReplayBuffer,
+                replay_buffer_kwargs={'frame_stack': 4, 'n_steps': 3, 'gamma': 0.99},
+                seed=1, device='cpu')
+    model.learn(100)
+    assert model._n_updates > 0
+    assert model.observation_space.shape == (12, 84, 84)
+    assert model.replay_buffer.observations.frames.shape[2:] == (3, 84, 84)
