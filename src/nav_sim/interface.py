@@ -34,6 +34,9 @@ PARAMETERS_SERVICE = f'{NODE_NAME}/set_parameters'  # rcl_interfaces/SetParamete
 POLICY_NODE_NAME = 'policy_node'
 DECISION_TOPIC = 'policy/decision'  # sensor_msgs/JointState: DECISION_FIELDS as names
 POLICY_OBSERVATION_TOPIC = 'policy/observation'  # sensor_msgs/Image, the 84x84 observation
+#: std_srvs/Trigger: a new episode starts (the policy's memory begins again), for a robot whose
+#: graph has no episode events
+POLICY_BEGIN_EPISODE_SERVICE = 'policy/begin_episode'
 #: what each decision carries, in this order (the JointState's names and positions): the
 #: action (-1: stop), its cmd_vel, the Q-values (NaN without), the image's age at the decision
 #: (wall clock since it arrived; node clock since its stamp) and the time to turn it into an

@@ -52,8 +52,7 @@ class DQNPolicy(DQNActor):
     def __init__(self, path: str | Path, device: str = 'cpu') -> None:
         """Load the checkpoint at ``path`` onto ``device`` (EvaluationError if it cannot)."""
         self.path = Path(path)
-        self.model = load_dqn(self.path, device)
-        self.model.policy.set_training_mode(False)
+        self.hold(load_dqn(self.path, device))
 
 
 class ExploringDQNPolicy(DQNPolicy):
@@ -76,7 +75,8 @@ class ExploringDQNPolicy(DQNPolicy):
         self._rng = np.random.default_rng(0)
 
     def begin_episode(self, seed: int) -> None:
-        """Reseed from the scenario seed (same seed -> same random actions)."""
+        """Begin the episode; reseed from the scenario seed (same seed -> same random actions)."""
+        super().begin_episode(seed)
         self._rng = np.random.default_rng([11, seed])
 
     def act(self, observation: np.ndarray) -> tuple[int, list[float] | None]:

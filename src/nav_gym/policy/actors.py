@@ -23,9 +23,11 @@ from typing import Any, Protocol
 import numpy as np
 
 from nav_gym.env.actions import action_twists
+from nav_gym.env.observation import OBS_SHAPE
 from nav_gym.errors import PolicyModelError, TrainConfigError
 from nav_gym.policy.config import PolicyConfig
 from nav_gym.policy.exported import META_FILE, OnnxActor, is_export, read_export
+from nav_gym.policy.history import FrameHistory
 from nav_gym.policy.servo import servo_act, servo_band
 from nav_gym.training.config import TrainConfig
 from nav_gym.training.run_dir import FINAL_MODEL, is_run_dir, load_config
@@ -83,10 +85,21 @@ class DQNActor:
     name = 'dqn'
 
     def __init__(self, path: Path, device: str = 'cpu') -> None:
-        """Load the checkpoint at ``path`` (any of the project's learners) onto ``device``."""
+        """Load the checkpoint at ``path`` (any of the project's learners) onto ``device``.
+
+        A frame-stack learner's network takes its last k frames: the actor keeps them
+        (:class:`FrameHistory`), begun afresh at each episode start.
+        """
         self.path = path
-        self.model = self.load(path, device)
-        self.model.policy.set_training_mode(False)
+        self.hold(self.load(path, device))
+
+    def hold(self, model: Any) -> None:
+        """Act with ``model``, with a frame history where its network takes its last frames."""
+        self.model = model
+        model.policy.set_training_mode(False)
+        k = model.observation_space.shape[0] // OBS_SHAPE[0]
+        self.history = FrameHistory(k) if k > 1 else None
+        self._begun = False
 
     @staticmethod
     def load(path: Path, device: str) -> Any:
@@ -99,12 +112,16 @@ class DQNActor:
                                    f'{exc})') from None
 
     def begin_episode(self, seed: int | None) -> None:
-        """Start an episode (the frozen network keeps no state)."""
-        return None
+        """Start an episode: a frame history begins again at the next observation."""
+        self._begun = False
 
     def act(self, observation: np.ndarray) -> tuple[int, tuple[float, ...]]:
         """Return argmax Q (what ``predict(deterministic=True)`` returns) and the Q-values."""
         import torch
+        if self.history is not None:  # the episode's first observation begins the history
+            observation = (self.history.push(observation) if self._begun
+                           else self.history.begin(observation))
+            self._begun = True
         tensor, _ = self.model.policy.obs_to_tensor(observation)
         with torch.no_grad():
             q_values = self.model.q_net(tensor)[0].cpu().numpy()

@@ -71,7 +71,17 @@ class Controller:
         self._last: Command | None = None
         self._last_image: Any = None
         self.image_error = ''  # why the newest image could not be converted
-        actor.begin_episode(None)  # the node's first episode starts with it (seed unknown)
+        self._stopped_stale = False
+        self.begin_episode(None)  # the node's first episode starts with it (seed unknown)
+
+    def begin_episode(self, seed: int | None) -> None:
+        """Start an episode: the actor's memory (a frame history) begins at the next image.
+
+        The node calls it at the sim's reset event, at its ``policy/begin_episode`` service and
+        here after a stale-image stop: what the robot saw before the gap is no history to act on.
+        """
+        self.actor.begin_episode(seed)
+        self._last = self._last_image = None
 
     def on_image(self, msg: Any, received: float | None = None) -> None:
         """Keep ``msg`` (a sensor_msgs/Image) as the newest image, received now by default."""
@@ -89,7 +99,11 @@ class Controller:
         if msg is None:
             return self._stop('no image', None, math.nan)
         if age > self.image_timeout:
+            if not self._stopped_stale:  # once per gap: the memory begins at the next image
+                self._stopped_stale = True
+                self.begin_episode(None)
             return self._stop('stale', msg.header, age)
+        self._stopped_stale = False
         last = self._last
         if msg is self._last_image and last is not None:
             return dataclasses.replace(last, image_age_s=age, inference_s=0.0,

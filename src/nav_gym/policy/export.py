@@ -15,6 +15,7 @@ import warnings
 from pathlib import Path
 from typing import Any
 
+from nav_gym.env.observation import OBS_SHAPE
 from nav_gym.errors import PolicyModelError, TrainConfigError
 from nav_gym.policy.actors import Acting, DQNActor, model_file, run_of
 from nav_gym.policy.exported import (
@@ -51,6 +52,10 @@ def export_policy(model: str | Path, out: str | Path | None = None) -> ExportSpe
     acting = Acting.of(config, source)
     target = Path(out).expanduser() if out else (run or checkpoint.parent) / EXPORT_DIR
     loaded = DQNActor.load(checkpoint, 'cpu')
+    if loaded.observation_space.shape != OBS_SHAPE:  # its history is not an ONNX input yet
+        raise PolicyModelError(f'{checkpoint} is a frame-stack learner (observation '
+                               f'{loaded.observation_space.shape}): it has no export yet; run it '
+                               'with its checkpoint instead')
     network = _acting_network(loaded, checkpoint)
     # the run's learner (its config names it); a checkpoint outside a run: what it saved
     learner = config.learner() if run is not None else getattr(loaded, 'learner', None)

@@ -29,6 +29,7 @@ from rclpy.clock import Clock, ClockType
 from rclpy.duration import Duration
 from rclpy.node import Node
 from sensor_msgs.msg import Image, JointState
+from std_srvs.srv import Trigger
 
 from nav_gym.policy.actors import load_policy
 from nav_gym.policy.config import PARAMETER_TYPES, PolicyConfig
@@ -72,6 +73,11 @@ class PolicyNode(Node):
             Image, interface.POLICY_OBSERVATION_TOPIC, qos.OBSERVATION)
         self.pub_diagnostics = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(Image, interface.IMAGE_TOPIC, self._on_image, qos.SENSOR_DATA)
+        # episode starts: the sim's reset events where a sim runs, else the explicit service
+        self.create_subscription(DiagnosticArray, interface.EVENT_TOPIC, self._on_event,
+                                 qos.OBSERVATION)
+        self.create_service(Trigger, interface.POLICY_BEGIN_EPISODE_SERVICE,
+                            self._on_begin_episode)
         # a wall-clock timer, even with use_sim_time: sim time moves in whole control periods,
         # and a timer on it would fire at each period's start, before that period's image
         self._timer = self.create_timer(self._period(self.settings), self._on_timer,
@@ -119,6 +125,18 @@ class PolicyNode(Node):
     def _on_image(self, msg: Image) -> None:
         self.controller.on_image(msg)
 
+    def _on_event(self, msg: DiagnosticArray) -> None:
+        """Begin an episode (and the policy's memory) at a sim's reset event."""
+        event = ros_msgs.parse_event(msg)
+        if event is not None and event['event'] == ros_msgs.EVENT_RESET:
+            seed = event.get('seed')
+            self.controller.begin_episode(seed if isinstance(seed, int) else None)
+
+    def _on_begin_episode(self, request: Any, response: Any) -> Any:
+        """Begin an episode on request: a robot whose graph has no episode events."""
+        self.controller.begin_episode(None)
+        response.success, response.message = True, 'episode begun: the memory starts afresh'
+        return response
     def _on_timer(self) -> None:
         command = self.controller.decide()
         start = time.perf_counter()

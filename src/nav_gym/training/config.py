@@ -42,7 +42,7 @@ _ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
 DEVICE = re.compile(r'auto|cpu|cuda(:\d+)?')
 #: the components' flags (LearnerSpec fields), each with its value that turns the component off
 COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0,
-              'prioritized_replay': False}
+              'prioritized_replay': False, 'frame_stack': 1}
 
 
 def vector_schedule(train_freq: int, gradient_steps: int, n_envs: int) -> tuple[int, int]:
@@ -88,6 +88,11 @@ class LearnerSpec:
                                  'RAD); 0: off', NON_NEGATIVE)
     prioritized_replay: bool = setting(False, 'proportional prioritized replay with importance '
                                        'weights (Schaul et al. 2016)')
+    frame_stack: int = setting(1, "the agent's memory: its last k camera frames stacked, the "
+                               "episode's first frame standing in before its start, rebuilt "
+                               'from a replay buffer of single frames (DRQN, Hausknecht & Stone '
+                               '2015, compare a recurrence with a stack of the same length); '
+                               '1: the frame alone', Bounds(1, 16))
     priority_alpha: float = setting(0.6, 'prioritized replay: priority = (|TD error| + '
                                     'eps)^alpha', FRACTION)
     priority_beta: float = setting(0.4, 'prioritized replay: importance-weight exponent at the '
@@ -96,6 +101,9 @@ class LearnerSpec:
     def __post_init__(self) -> None:
         """Refuse values the learner cannot use (TrainConfigError): each field's bounds."""
         check_bounds(self, TrainConfigError)
+        if self.frame_stack > 1 and self.prioritized_replay:
+            raise TrainConfigError('prioritized_replay and frame_stack > 1 do not combine yet: '
+                                   'set one of them')
 
     @property
     def vanilla(self) -> bool:
@@ -114,6 +122,8 @@ class LearnerSpec:
         if self.augment_shift:
             parts.append(f'random shifts of up to {self.augment_shift} px (DrQ, Kostrikov et al. '
                          '2021)')
+        if self.frame_stack > 1:
+            parts.append(f'a {self.frame_stack}-frame stack (Hausknecht & Stone 2015)')
         if self.prioritized_replay:
             parts.append(f'prioritized replay (Schaul et al. 2016, alpha {self.priority_alpha}, '
                          f'beta {self.priority_beta} to 1)')
@@ -165,6 +175,7 @@ class TrainConfig:
     dueling: bool = _learner('dueling')
     augment_shift: int = _learner('augment_shift')
     prioritized_replay: bool = _learner('prioritized_replay')
+    frame_stack: int = _learner('frame_stack')
     priority_alpha: float = _learner('priority_alpha')
     priority_beta: float = _learner('priority_beta')
     checkpoint_freq: int = setting(10_000, 'steps between checkpoints (all are kept)',

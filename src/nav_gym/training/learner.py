@@ -42,6 +42,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from nav_gym.training.config import LearnerSpec
+from nav_gym.training.memory import FrameStackReplayBuffer
 
 PRIORITY_EPS = 1e-6  # added to |TD error| so that no transition's priority is zero
 
@@ -270,7 +271,11 @@ def learner_kwargs(spec: LearnerSpec, gamma: float) -> dict[str, Any]:
         return {}
     kwargs: dict[str, Any] = {'policy_kwargs': {'optimizer_kwargs': {'fused': True}},
                               'learner': spec}
-    if spec.prioritized_replay:
+    if spec.frame_stack > 1:  # single frames in the buffer, stacks rebuilt at sample time
+        kwargs['replay_buffer_class'] = FrameStackReplayBuffer
+        kwargs['replay_buffer_kwargs'] = {'frame_stack': spec.frame_stack,
+                                          'n_steps': spec.n_steps, 'gamma': gamma}
+    elif spec.prioritized_replay:
         kwargs['replay_buffer_class'] = PrioritizedReplayBuffer
         kwargs['replay_buffer_kwargs'] = {'alpha': spec.priority_alpha,
                                           'beta': spec.priority_beta,

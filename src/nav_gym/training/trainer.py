@@ -63,9 +63,12 @@ def new_run_dir(config: TrainConfig) -> Path:
 def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> Any:
     """Return the run's ``n_envs`` envs: ``ParallelEnvs`` of ``Monitor(NavigationEnv)``.
 
+    With ``frame_stack`` > 1 they are wrapped in the agent's ``FrameStackEnv``.
+
     Their episodes all go to the run's one monitor.csv (a resumed run appends to it).
     """
     # torch (SB3's VecEnv): after quiet_learner_threads()
+    from nav_gym.training.memory import FrameStackEnv
     from nav_gym.training.parallel import SETTLE_SECONDS, MonitorFile, ParallelEnvs
     monitor_file = run_dir / MONITOR
     writer = MonitorFile(str(monitor_file), resume and monitor_file.exists(),
@@ -73,11 +76,13 @@ def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> Any:
     # a step that ends an episode waits on up to about five sim requests (stop, reset, ...)
     settle = max(SETTLE_SECONDS, 6 * config.sim_timeout)
     try:
-        return ParallelEnvs([functools.partial(_monitored_env, writer, env_config)
+        envs = ParallelEnvs([functools.partial(_monitored_env, writer, env_config)
                              for env_config in config.env_configs()], settle)
     except BaseException:
         writer.close()
         raise
+    # the agent's memory (frame_stack > 1): its stacks, on its side of the envs
+    return FrameStackEnv(envs, config.frame_stack) if config.frame_stack > 1 else envs
 
 
 def _monitored_env(writer: Any, env_config: Any) -> Any:

@@ -192,3 +192,20 @@ def test_the_params_file_lists_every_parameter_with_its_default():
     assert params['/**']['ros__parameters'] == {f.name: f.default for f in fields}
     assert (REPO / 'config' / 'policy.yaml').read_text() == \
         (share / 'config' / 'policy.yaml').read_text()
+
+
+def test_a_stale_image_stop_and_an_explicit_start_begin_the_actors_memory():
+    """After a gap in the camera, what the robot saw before is no history to act on."""
+    actor = Counting()
+    ctl, clock = controller(actor, timeout=1.0)
+    ctl.on_image(image(np.zeros((96, 128, 3), np.uint8)))
+    assert ctl.decide().reason == 'decided' and actor.episodes == [None]
+    clock.now += 1.5
+    assert ctl.decide().reason == 'stale' and ctl.decide().reason == 'stale'
+    assert actor.episodes == [None, None]  # once per gap
+    ctl.on_image(image(np.zeros((96, 128, 3), np.uint8)))
+    assert ctl.decide().reason == 'decided'
+    ctl.begin_episode(7)  # the sim's reset event, or the node's policy/begin_episode service
+    assert actor.episodes == [None, None, 7]
+    assert ctl.decide().reason == 'decided'  # the same image, decided afresh in the episode
+    assert len(actor.observations) == 3

@@ -110,3 +110,38 @@ def test_a_dqn_trains_on_stacks_with_a_single_frame_buffer(spaces_only):
     assert model._n_updates > 0
     assert model.observation_space.shape == (12, 84, 84)
     assert model.replay_buffer.observations.frames.shape[2:] == (3, 84, 84)
+
+
+@pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
+def test_an_actor_of_a_frame_stack_learner_keeps_and_begins_its_history(spaces_only, tmp_path):
+    import torch
+
+    from nav_gym.errors import PolicyModelError
+    from nav_gym.policy.actors import DQNActor
+    from nav_gym.policy.export import export_policy
+    from nav_gym.training.config import LearnerSpec
+    from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy
+
+    spec = LearnerSpec(frame_stack=2)
+    model = learner_class(None, spec)(learner_policy(spec), FrameStackEnv(
+        DummyVecEnv([spaces_only]), 2), buffer_size=200, learning_starts=40, batch_size=8,
+        seed=1, device='cpu', **learner_kwargs(spec, 0.99))
+    model.learn(60)
+    assert model._n_updates > 0 and spec.describe().endswith('a 2-frame stack (Hausknecht & '
+                                                             'Stone 2015)')
+    model.save(tmp_path / 'model.zip')
+    actor = DQNActor(tmp_path / 'model.zip')
+    seen = []
+    network = actor.model.q_net
+    actor.model.q_net = lambda tensor: seen.append(tensor.clone()) or network(tensor)
+    frames = [np.full((3, 84, 84), value, np.uint8) for value in (10, 20, 30)]
+    actor.begin_episode(1)
+    actor.act(frames[0])
+    actor.act(frames[1])
+    actor.begin_episode(2)  # a new episode: the history begins again
+    actor.act(frames[2])
+    firsts = [[int(t[0, c, 0, 0]) for c in (0, 3)] for t in seen]  # the raw uint8 stacks
+    assert firsts == [[10, 10], [10, 20], [30, 30]]
+    assert all(t.shape == torch.Size([1, 6, 84, 84]) for t in seen)
+    with pytest.raises(PolicyModelError, match='frame-stack learner'):
+        export_policy(tmp_path / 'model.zip', tmp_path / 'export')
