@@ -15,7 +15,9 @@ own ``DQN`` untouched (the workshop's learner, bit for bit: config/workshop.yaml
 - ``augment_shift``: every sampled observation and next observation shifted at random by up to
   this many pixels with replicated edges (DrQ, Kostrikov et al. 2021; RAD, Laskin et al. 2020);
 - ``prioritized_replay``: proportional prioritized replay with importance weights (Schaul et
-  al. 2016).
+  al. 2016);
+- ``frame_stack``: the agent's last k frames as its input, replayed from single frames
+  (:mod:`nav_gym.training.memory`; DRQN's comparison, Hausknecht & Stone 2015).
 
 Everything else is SB3's: network, replay, exploration, target updates, the saved model format
 (a checkpoint of any of these loads with ``DQN.load``).  One change is not a component but how
