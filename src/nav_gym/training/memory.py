@@ -80,12 +80,6 @@ class FrameStore:
         """Return the bytes the frames take."""
         return int(self.frames.nbytes)
 
-    @property
-    def shape(self) -> tuple[int, ...]:
-        """Return the shape the stacks have as SB3's observation array."""
-        size, n_envs, channels, *rest = self.frames.shape
-        return (size, n_envs, channels * self.buffer.frame_stack, *rest)
-
     def __setitem__(self, position: int, stacked: np.ndarray) -> None:
         """Keep the newest frame of each env's stacked observation at ``position``."""
         self.frames[position] = np.asarray(stacked)[:, -self.frames.shape[2]:]
@@ -112,7 +106,6 @@ class FrameStackReplayBuffer(NStepReplayBuffer):
         super().__init__(buffer_size, frame_space(observation_space, frame_stack), *args,
                          **kwargs)
         self.observation_space = observation_space
-        self.obs_shape = observation_space.shape
         self.observations = FrameStore(self.observations, self, nxt=False)
         self.next_observations = FrameStore(self.next_observations, self, nxt=True)
 
