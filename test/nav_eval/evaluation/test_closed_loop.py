@@ -106,8 +106,12 @@ def test_a_stop_answers_no_image_even_with_the_stale_image_stamp():
 
 @pytest.fixture(scope='module')
 def evaluated(tmp_path_factory, spaces_only) -> Path:
-    """Evaluate a tiny run in lockstep and closed loop at 8x real time on two seeds."""
-    run = make_tiny_run(tmp_path_factory.mktemp('run'), spaces_only, max_episode_steps=15)
+    """Evaluate a tiny run in lockstep and closed loop at 8x real time on two seeds.
+
+    Its learner has memory (a 2-frame stack), which both loops keep through the one actor.
+    """
+    run = make_tiny_run(tmp_path_factory.mktemp('run'), spaces_only, max_episode_steps=15,
+                        frame_stack=2)
     result = subprocess.run(
         [str(Path(sys.prefix) / 'bin' / 'nav-eval-evaluate'), str(run), '--closed-loop',
          '--realtime-rate', '8', '--heldout-seeds', '201-202'],
@@ -156,6 +160,60 @@ def test_the_closed_loop_bag_holds_the_decisions_and_replays_the_layout(evaluate
     decisions = [m for _, m in messages[live_topics.DECISION_TOPIC]]
     assert decisions and list(decisions[0].name)[:3] == ['action', 'linear', 'angular']
     assert [e['seed'] for e in episodes_in_bag(bag)] == [201, 202]
+
+
+def test_memory_acts_in_the_closed_loop_as_in_lockstep_on_the_images_it_decided_on(evaluated):
+    """The policy node's decisions, replayed through the lockstep evaluation's actor.
+
+    Given the same images in the same order (the timing the closed loop happened to have),
+    the actor's history, begun at each episode's start, gives the node's very Q-values.  The
+    node's history begins again at the sim's reset event and after a stale-image stop (action
+    -1); a decision it made on an image before it took the reset event, it made again after.
+    """
+    from nav_eval.recording.bags import read_bag
+    from nav_gym.policy.actors import DQNActor
+    from nav_sim.viz import topics as live_topics
+    out = evaluated / 'eval_closed_loop'
+    bag = read_bag(out / 'bags' / 'rt8_heldout', [live_topics.DECISION_TOPIC])
+    decisions = []
+    for _, msg in bag[live_topics.DECISION_TOPIC]:
+        values = dict(zip(msg.name, msg.position, strict=True))
+        decisions.append((msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec,
+                          int(values['action']), values['inference_ms'] > 0.0,
+                          (values['q_left'], values['q_forward'], values['q_right'])))
+    actor = DQNActor(evaluated / 'final_model.zip')
+    compared = 0
+    for seed in (201, 202):
+        trace = json.loads((out / 'traces' / 'rt8_heldout' / f'seed_{seed}.json').read_text())
+        frames = np.load(out / 'traces' / 'rt8_heldout' / f'seed_{seed}_frames.npz')['obs']
+        steps = trace['steps']
+        period = (steps[1]['stamp_ns'] - steps[0]['stamp_ns']) // (steps[1]['step']
+                                                                   - steps[0]['step'])
+        stamps = [steps[0]['stamp_ns'] - steps[0]['step'] * period] + [
+            s['stamp_ns'] for s in steps]
+        frame_of = {stamp: i for i, stamp in enumerate(stamps)}
+        mine = [d for d in decisions if d[0] in frame_of]  # decisions on this episode's images
+        # the node's actor calls: fresh decisions; one made again on the same image replaces
+        # the one before it (made before the reset event), and a stop begins the history again
+        calls: list[tuple[int, tuple[float, ...]] | None] = []
+        for stamp, action, fresh, q_values in mine:
+            if action < 0:
+                calls.append(None)
+            elif fresh:
+                if calls and calls[-1] is not None and calls[-1][0] == stamp:
+                    calls.pop()
+                calls.append((stamp, q_values))
+        assert sum(call is not None for call in calls) >= 3, (seed, mine)
+        actor.begin_episode(seed)
+        for call in calls:
+            if call is None:
+                actor.begin_episode(None)
+                continue
+            stamp, q_values = call
+            _, replayed = actor.act(frames[frame_of[stamp]])
+            assert replayed == pytest.approx(q_values, abs=1e-6), (seed, stamp)
+            compared += 1
+    assert compared >= 6
 
 
 def test_the_report_puts_lockstep_and_real_time_side_by_side(evaluated):

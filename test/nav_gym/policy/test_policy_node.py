@@ -7,6 +7,7 @@ listens to what the policy node sends: ``cmd_vel``, ``policy/decision`` and
 
 from __future__ import annotations
 
+import itertools
 import math
 import signal
 import subprocess
@@ -16,15 +17,19 @@ from collections.abc import Iterator
 import cv2
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray
 from sensor_msgs.msg import Image
+from std_srvs.srv import Trigger
 
 from helpers import interrupt, make_tiny_run
 from nav_gym.env.observation import image_msg_to_observation
+from nav_sim import interface
 from nav_sim.core.config import SimConfig
 from nav_sim.core.kinematics import twist_to_wheels
 from nav_sim.core.sim import NavSim
 from nav_sim.paths import executable_path
 from nav_sim.ros import messages as ros_msgs
+from nav_sim.ros import qos
 from policy_graph import Graph
 
 #: how each encoding's bytes are made from RGB (mono8: from the RGB's grey)
@@ -265,3 +270,72 @@ def test_a_dqn_run_decides_with_its_q_values_and_its_runs_actions(tmp_path, name
         code, text = interrupt(process)
     assert code == 0 and 'Traceback' not in text, text
     assert f'from {run}/config.yaml' in text
+
+
+@pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
+def test_a_memory_policy_begins_its_history_at_a_reset_event_the_service_and_a_stale_stop(
+        tmp_path, namespace, frames, spaces_only, graph):
+    """A 2-frame-stack model: the Q-values of image A tell whether A began the history.
+
+    A fresh history stacks A with itself; after B without a new episode it stacks B and A,
+    whose Q-values differ (checked first: the probe can see a history that goes on).
+    """
+    run = make_tiny_run(tmp_path, spaces_only, frame_stack=2)
+    process = start_policy('-r', f'__ns:={namespace}', '-p', f'model:={run}',
+                           '-p', 'period:=0.05', '-p', 'image_timeout:=2.0')
+    events = graph.node.create_publisher(DiagnosticArray, interface.EVENT_TOPIC,
+                                         qos.OBSERVATION)
+    begin = graph.node.create_client(Trigger, interface.POLICY_BEGIN_EPISODE_SERVICE)
+    stamps = itertools.count(1)
+    image_a, image_b = frames[0], frames[2]
+
+    def q_values(msg) -> tuple[float, ...]:  # noqa: ANN001
+        d = graph.decision(msg)
+        return d['q_left'], d['q_forward'], d['q_right']
+
+    def decided(rgb: np.ndarray, wanted: tuple[float, ...] | None = None) -> tuple[float, ...]:
+        """Show ``rgb``; return the Q-values of the decision on it (``wanted``, once they are).
+
+        A reset event and the image after it travel on two topics: a decision the node made
+        before it took the event is made again after it, from the fresh history.
+        """
+        stamp = next(stamps) * 1_000_000_000
+        graph.publish(encoded(rgb, 'rgb8', stamp))
+
+        def found() -> tuple[float, ...] | None:
+            mine = [q_values(d) for d in graph.decisions
+                    if ros_msgs.stamp_to_ns(d.header.stamp) == stamp]
+            if wanted is None:
+                return mine[0] if mine else None
+            return wanted if wanted in mine else None
+        def last() -> str:
+            return f'the last Q-values: {[q_values(d) for d in graph.decisions[-5:]]}'
+        return graph.spin_until(found, 20.0, f'a decision on the image stamped {stamp}', last)
+
+    try:
+        graph.connected(details=lambda: output(process))
+        graph.spin_until(lambda: events.get_subscription_count() > 0
+                         and begin.service_is_ready(), 20.0, 'the episode event and service')
+        fresh = decided(image_a)  # the node's first episode: A begins the history
+        after_b = decided(image_b)
+        going_on = decided(image_a)  # no new episode: B and A
+        assert going_on != fresh, 'the probe cannot tell a history that goes on'
+        assert decided(image_b) == after_b  # B last: A without a new episode is B and A
+        # 1. the sim's reset event
+        events.publish(ros_msgs.event_msg(ros_msgs.EVENT_RESET, {'seed': 5, 'episode': 2},
+                                          ros_msgs.stamp_from_ns(0)))
+        assert decided(image_a, fresh) == fresh
+        assert decided(image_b) == after_b  # and the history goes on within the episode
+        # 2. the explicit reset: the policy/begin_episode service
+        future = begin.call_async(Trigger.Request())
+        graph.spin_until(future.done, 20.0, 'the policy/begin_episode answer')
+        assert future.result().success
+        assert decided(image_a) == fresh
+        assert decided(image_b) == after_b
+        # 3. a stale image: the stop, then the next image begins the history
+        graph.spin_until(lambda: graph.decision(graph.decisions[-1])['action'] == -1, 20.0,
+                         'the stale-image stop')
+        assert decided(image_a) == fresh
+    finally:
+        code, text = interrupt(process)
+    assert code == 0 and 'Traceback' not in text, text
