@@ -73,7 +73,7 @@ def make_tiny_run(path, spaces_only: type, steps: int = 32, **settings: object):
     """Write a run directory at ``path`` with a tiny model of the default learner; return it.
 
     ``config.yaml`` holds ``TrainConfig(**settings)``; the model learns ``steps`` steps on an
-    env with only the spaces (no sim; in the agent's frame stacks with ``frame_stack`` > 1) and
+    env with only the spaces (no sim; in the agent's stacks with memory) and
     is saved as ``checkpoints/dqn_<steps>_steps.zip``, then ``steps`` more as
     ``final_model.zip``: enough for evaluation, reports and the policy node, in seconds.
     """
@@ -83,11 +83,12 @@ def make_tiny_run(path, spaces_only: type, steps: int = 32, **settings: object):
     (path / 'config.yaml').write_text(config.to_yaml())
     learner = config.learner()
     env = spaces_only()
-    if learner.frame_stack > 1:  # the agent's stacks, on its side of the env (as training)
+    if learner.memory:  # the agent's stacks, on its side of the env (as training)
         from stable_baselines3.common.vec_env import DummyVecEnv
 
         from nav_gym.training.memory import FrameStackEnv
-        env = FrameStackEnv(DummyVecEnv([spaces_only]), learner.frame_stack)
+        env = FrameStackEnv(DummyVecEnv([spaces_only]), learner.frame_stack,
+                            learner.previous_action)
     model = learner_class(None, learner)(
         learner_policy(learner), env, buffer_size=64, learning_starts=16, batch_size=8,
         seed=3, device='cpu', **learner_kwargs(learner, config.gamma))

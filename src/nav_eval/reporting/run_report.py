@@ -53,11 +53,12 @@ SECTIONS = ('1. Observation and action checks', '2. Training',
             '5. Representative trajectories', '6. Failure diagnosis',
             '7. Attempts and targeted improvements', '8. Reproduce')
 HYPERPARAMETERS = ('double_q', 'n_steps', 'dueling', 'augment_shift', 'prioritized_replay',
-                   'frame_stack', 'priority_alpha', 'priority_beta', 'learning_rate',
-                   'buffer_size', 'learning_starts', 'batch_size', 'gamma', 'train_freq',
-                   'gradient_steps', 'target_update_interval', 'exploration_fraction',
-                   'exploration_initial_eps', 'exploration_final_eps', 'seed', 'n_envs', 'split',
-                   'max_episode_steps', 'forward_speed', 'turn_rate', 'turn_speed', 'sim_params')
+                   'frame_stack', 'previous_action', 'priority_alpha', 'priority_beta',
+                   'learning_rate', 'buffer_size', 'learning_starts', 'batch_size', 'gamma',
+                   'train_freq', 'gradient_steps', 'target_update_interval',
+                   'exploration_fraction', 'exploration_initial_eps', 'exploration_final_eps',
+                   'seed', 'n_envs', 'split', 'max_episode_steps', 'forward_speed', 'turn_rate',
+                   'turn_speed', 'sim_params')
 EVAL_COLUMNS = ('Set', 'Policy', 'Split', 'Episodes', 'Success rate', 'Collision rate',
                 'Timeout rate', 'Mean length', 'Mean SPL', 'Mean return')
 

@@ -27,7 +27,7 @@ from nav_gym.env.observation import OBS_SHAPE
 from nav_gym.errors import PolicyModelError, TrainConfigError
 from nav_gym.policy.config import PolicyConfig
 from nav_gym.policy.exported import META_FILE, OnnxActor, is_export, read_export
-from nav_gym.policy.history import FrameHistory
+from nav_gym.policy.history import NO_ACTION, FrameHistory
 from nav_gym.policy.servo import servo_act, servo_band
 from nav_gym.training.config import TrainConfig
 from nav_gym.training.run_dir import FINAL_MODEL, is_run_dir, load_config
@@ -87,19 +87,22 @@ class DQNActor:
     def __init__(self, path: Path, device: str = 'cpu') -> None:
         """Load the checkpoint at ``path`` (any of the project's learners) onto ``device``.
 
-        A frame-stack learner's network takes its last k frames: the actor keeps them
-        (:class:`FrameHistory`), begun afresh at each episode start.
+        A learner with memory takes its last k frames (and the action before the latest): the
+        actor keeps them (:class:`FrameHistory`), begun afresh at each episode start.
         """
         self.path = path
         self.hold(self.load(path, device))
 
     def hold(self, model: Any) -> None:
-        """Act with ``model``, with a frame history where its network takes its last frames."""
+        """Act with ``model``, with a history where its network takes its last frames."""
         self.model = model
         model.policy.set_training_mode(False)
-        k = model.observation_space.shape[0] // OBS_SHAPE[0]
-        self.history = FrameHistory(k) if k > 1 else None
+        spec = getattr(model, 'learner', None)  # SB3's own DQN has none: no memory
+        n_actions = int(model.action_space.n) if getattr(spec, 'previous_action', False) else 0
+        k = (model.observation_space.shape[0] - n_actions) // OBS_SHAPE[0]
+        self.history = FrameHistory(k, n_actions) if k > 1 or n_actions else None
         self._begun = False
+        self._action = NO_ACTION
 
     @staticmethod
     def load(path: Path, device: str) -> Any:
@@ -119,13 +122,14 @@ class DQNActor:
         """Return argmax Q (what ``predict(deterministic=True)`` returns) and the Q-values."""
         import torch
         if self.history is not None:  # the episode's first observation begins the history
-            observation = (self.history.push(observation) if self._begun
+            observation = (self.history.push(observation, self._action) if self._begun
                            else self.history.begin(observation))
             self._begun = True
         tensor, _ = self.model.policy.obs_to_tensor(observation)
         with torch.no_grad():
             q_values = self.model.q_net(tensor)[0].cpu().numpy()
-        return int(np.argmax(q_values)), tuple(round(float(q), 6) for q in q_values)
+        self._action = int(np.argmax(q_values))
+        return self._action, tuple(round(float(q), 6) for q in q_values)
 
 
 class ServoActor:

@@ -53,7 +53,8 @@ def export_policy(model: str | Path, out: str | Path | None = None) -> ExportSpe
     target = Path(out).expanduser() if out else (run or checkpoint.parent) / EXPORT_DIR
     loaded = DQNActor.load(checkpoint, 'cpu')
     if loaded.observation_space.shape != OBS_SHAPE:  # its history is not an ONNX input yet
-        raise PolicyModelError(f'{checkpoint} is a frame-stack learner (observation '
+        raise PolicyModelError(f'{checkpoint} is a learner with memory (a frame stack or the '
+                               'previous action: observation '
                                f'{loaded.observation_space.shape}): it has no export yet; run it '
                                'with its checkpoint instead')
     network = _acting_network(loaded, checkpoint)

@@ -5,9 +5,15 @@ episode, oldest first, concatenated along the channels: ``(3 k, 84, 84)`` uint8 
 ``(3, 84, 84)`` frames.  At an episode's start there are no earlier frames: its first frame
 stands in for them (as Gymnasium's ``FrameStackObservation`` pads with the reset observation).
 
+With the previous action (Mirowski et al. 2017), ``n_actions`` planes follow the frames: the
+plane of the action taken before the latest frame is 255, the others 0, and all are 0 at an
+episode's first frame (no action was taken in it yet).  An image network reads them as one-hot
+inputs (``/ 255``), and a random shift leaves them as they are.
+
 Acting keeps the frames in :class:`FrameHistory` (begun at each episode start: the acting
 protocol's ``begin_episode``); the replay buffer stores single frames and rebuilds the same
-stacks at sample time with :func:`history_positions`, so that its memory does not grow k-fold.
+stacks at sample time with :func:`history_positions` and :func:`action_planes`, so that its
+memory does not grow k-fold.
 """
 
 from __future__ import annotations
@@ -23,32 +29,52 @@ def stack(frames: list[np.ndarray]) -> np.ndarray:
     return np.concatenate(frames, axis=0)
 
 
-class FrameHistory:
-    """The last ``k`` frames of the current episode, as acting sees them."""
+NO_ACTION = -1  # the previous action at an episode's first frame: none
 
-    def __init__(self, k: int) -> None:
-        """Keep ``k`` >= 1 frames (1: the frame alone, no memory)."""
+
+def action_planes(actions: np.ndarray, n_actions: int, shape: tuple[int, int]) -> np.ndarray:
+    """Return one-hot uint8 planes ``(len(actions), n_actions, H, W)`` of previous actions.
+
+    The plane of each action is 255, the others 0; :data:`NO_ACTION` (-1) gives all zeros.
+    """
+    actions = np.asarray(actions, dtype=np.int64).reshape(-1)
+    hot = (actions[:, None] == np.arange(n_actions)[None, :]).astype(np.uint8) * 255
+    return np.broadcast_to(hot[:, :, None, None], (len(actions), n_actions, *shape)).copy()
+
+
+class FrameHistory:
+    """The last ``k`` frames of the current episode (and the action before the latest one)."""
+
+    def __init__(self, k: int, n_actions: int = 0) -> None:
+        """Keep ``k`` >= 1 frames (1: the frame alone); ``n_actions`` > 0 adds action planes."""
         if k < 1:
             raise ValueError(f'a frame history holds at least 1 frame, got {k}')
-        self.k = k
+        self.k, self.n_actions = k, n_actions
         self._frames: deque[np.ndarray] = deque(maxlen=k)
+        self._action = NO_ACTION
 
     def begin(self, frame: np.ndarray) -> np.ndarray:
         """Start an episode with its first frame; return the first stacked observation."""
         self._frames.clear()
         self._frames.extend([frame] * self.k)
+        self._action = NO_ACTION
         return self.observation()
 
-    def push(self, frame: np.ndarray) -> np.ndarray:
-        """Add the latest frame of the episode; return the stacked observation."""
+    def push(self, frame: np.ndarray, action: int = NO_ACTION) -> np.ndarray:
+        """Add the latest frame of the episode, which ``action`` led to; return the stack."""
         if not self._frames:
             raise RuntimeError('push before begin: an episode starts with begin(first frame)')
         self._frames.append(frame)
+        self._action = int(action)
         return self.observation()
 
     def observation(self) -> np.ndarray:
-        """Return the stack of the last ``k`` frames, oldest first."""
-        return stack(list(self._frames))
+        """Return the stack of the last ``k`` frames, oldest first (then the action planes)."""
+        frames = list(self._frames)
+        if self.n_actions:
+            frames.append(action_planes(np.array([self._action]), self.n_actions,
+                                        frames[-1].shape[1:])[0])
+        return stack(frames)
 
 
 def history_positions(positions: np.ndarray, k: int, size: int,

@@ -42,7 +42,7 @@ _ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
 DEVICE = re.compile(r'auto|cpu|cuda(:\d+)?')
 #: the components' flags (LearnerSpec fields), each with its value that turns the component off
 COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0,
-              'prioritized_replay': False, 'frame_stack': 1}
+              'prioritized_replay': False, 'frame_stack': 1, 'previous_action': False}
 
 
 def vector_schedule(train_freq: int, gradient_steps: int, n_envs: int) -> tuple[int, int]:
@@ -93,6 +93,9 @@ class LearnerSpec:
                                'from a replay buffer of single frames (DRQN, Hausknecht & Stone '
                                '2015, compare a recurrence with a stack of the same length); '
                                '1: the frame alone', Bounds(1, 16))
+    previous_action: bool = setting(False, "the agent's memory of what it did: the action that "
+                                    'led to the latest frame as one-hot input planes after the '
+                                    'frames, none at an episode start (Mirowski et al. 2017)')
     priority_alpha: float = setting(0.6, 'prioritized replay: priority = (|TD error| + '
                                     'eps)^alpha', FRACTION)
     priority_beta: float = setting(0.4, 'prioritized replay: importance-weight exponent at the '
@@ -101,9 +104,14 @@ class LearnerSpec:
     def __post_init__(self) -> None:
         """Refuse values the learner cannot use (TrainConfigError): each field's bounds."""
         check_bounds(self, TrainConfigError)
-        if self.frame_stack > 1 and self.prioritized_replay:
-            raise TrainConfigError('prioritized_replay and frame_stack > 1 do not combine yet: '
-                                   'set one of them')
+        if self.memory and self.prioritized_replay:
+            raise TrainConfigError('prioritized_replay and memory (frame_stack > 1, '
+                                   'previous_action) do not combine yet: set one of them')
+
+    @property
+    def memory(self) -> bool:
+        """Tell whether the agent keeps a history (a frame stack or the previous action)."""
+        return self.frame_stack > 1 or self.previous_action
 
     @property
     def vanilla(self) -> bool:
@@ -124,6 +132,8 @@ class LearnerSpec:
                          '2021)')
         if self.frame_stack > 1:
             parts.append(f'a {self.frame_stack}-frame stack (Hausknecht & Stone 2015)')
+        if self.previous_action:
+            parts.append('the previous action as input (Mirowski et al. 2017)')
         if self.prioritized_replay:
             parts.append(f'prioritized replay (Schaul et al. 2016, alpha {self.priority_alpha}, '
                          f'beta {self.priority_beta} to 1)')
@@ -176,6 +186,7 @@ class TrainConfig:
     augment_shift: int = _learner('augment_shift')
     prioritized_replay: bool = _learner('prioritized_replay')
     frame_stack: int = _learner('frame_stack')
+    previous_action: bool = _learner('previous_action')
     priority_alpha: float = _learner('priority_alpha')
     priority_beta: float = _learner('priority_beta')
     checkpoint_freq: int = setting(10_000, 'steps between checkpoints (all are kept)',

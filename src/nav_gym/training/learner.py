@@ -273,9 +273,10 @@ def learner_kwargs(spec: LearnerSpec, gamma: float) -> dict[str, Any]:
         return {}
     kwargs: dict[str, Any] = {'policy_kwargs': {'optimizer_kwargs': {'fused': True}},
                               'learner': spec}
-    if spec.frame_stack > 1:  # single frames in the buffer, stacks rebuilt at sample time
+    if spec.memory:  # single frames in the buffer, stacks rebuilt at sample time
         kwargs['replay_buffer_class'] = FrameStackReplayBuffer
         kwargs['replay_buffer_kwargs'] = {'frame_stack': spec.frame_stack,
+                                          'previous_action': spec.previous_action,
                                           'n_steps': spec.n_steps, 'gamma': gamma}
     elif spec.prioritized_replay:
         kwargs['replay_buffer_class'] = PrioritizedReplayBuffer

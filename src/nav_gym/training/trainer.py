@@ -63,7 +63,8 @@ def new_run_dir(config: TrainConfig) -> Path:
 def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> Any:
     """Return the run's ``n_envs`` envs: ``ParallelEnvs`` of ``Monitor(NavigationEnv)``.
 
-    With ``frame_stack`` > 1 they are wrapped in the agent's ``FrameStackEnv``.
+    With memory (``frame_stack`` > 1, ``previous_action``) they are wrapped in the agent's
+    ``FrameStackEnv``.
 
     Their episodes all go to the run's one monitor.csv (a resumed run appends to it).
     """
@@ -81,8 +82,10 @@ def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> Any:
     except BaseException:
         writer.close()
         raise
-    # the agent's memory (frame_stack > 1): its stacks, on its side of the envs
-    return FrameStackEnv(envs, config.frame_stack) if config.frame_stack > 1 else envs
+    # the agent's memory (frame_stack > 1, previous_action): its stacks, on its side of the envs
+    learner = config.learner()
+    return (FrameStackEnv(envs, learner.frame_stack, learner.previous_action) if learner.memory
+            else envs)
 
 
 def _monitored_env(writer: Any, env_config: Any) -> Any:

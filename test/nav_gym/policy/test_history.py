@@ -71,3 +71,17 @@ def test_the_replay_buffer_rebuilds_the_stacks_acting_saw(k, size):
             assert np.array_equal(replayed, acting[step]), (position, row)
         else:  # reaches behind the oldest kept frame: padded with that frame
             assert row[0] == oldest_position or dones[(row[0] - 1) % size]
+
+
+def test_the_previous_action_follows_the_frames_as_one_hot_planes():
+    from nav_gym.policy.history import NO_ACTION, action_planes
+    planes = action_planes(np.array([2, NO_ACTION, 0]), 3, (2, 2))
+    assert planes.shape == (3, 3, 2, 2) and planes.dtype == np.uint8
+    assert [list(p[:, 0, 0]) for p in planes] == [[0, 0, 255], [0, 0, 0], [255, 0, 0]]
+    history = FrameHistory(2, n_actions=3)
+    first = history.begin(frame(1))
+    assert first.shape == (9, 2, 2) and not first[6:].any()  # no action yet
+    after = history.push(frame(2), 1)
+    assert np.array_equal(after[:6], stack([frame(1), frame(2)]))
+    assert list(after[6:, 0, 0]) == [0, 255, 0]
+    assert not history.begin(frame(3))[6:].any()  # a new episode: none again

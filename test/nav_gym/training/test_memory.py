@@ -1,4 +1,4 @@
-"""The frame-stack learner on SB3: the agent's stacks, and the replay buffer that rebuilds them."""
+"""The memory learner on SB3: the agent's stacks, and the replay buffer that rebuilds them."""
 
 from __future__ import annotations
 
@@ -59,19 +59,41 @@ def test_the_agent_stacks_its_frames_and_begins_afresh_at_each_episode():
             assert terminal[7, 0, 0] != obs[0][7, 0, 0]
 
 
-@pytest.mark.parametrize('k', [1, 4])
-def test_the_buffer_keeps_single_frames_and_samples_the_stacks_added(k):
+def test_the_previous_action_follows_the_frames_as_planes_none_at_an_episode_start():
+    envs = FrameStackEnv(DummyVecEnv([lambda: Counter(1)]), 2, previous_action=True)
+    assert envs.observation_space.shape == (9, 4, 4)
+    assert envs.observation_space.high[6:].min() == 255 == envs.observation_space.high.max()
+    first = envs.reset()[0]
+    assert not first[6:].any()  # no action yet
+    rng = np.random.default_rng(0)
+    for _ in range(30):
+        action = int(rng.integers(3))
+        obs, _, dones, infos = envs.step(np.array([action]))
+        led_to = infos[0]['terminal_observation'] if dones[0] else obs[0]
+        assert [int(led_to[6 + a, 0, 0]) for a in range(3)] == [
+            255 * (a == action) for a in range(3)]
+        if dones[0]:
+            assert not obs[0][6:].any()  # the next episode's first frame: none
+
+
+@pytest.mark.parametrize(('k', 'previous_action'), [(1, False), (4, False), (1, True),
+                                                    (3, True)])
+def test_the_buffer_keeps_single_frames_and_samples_the_stacks_added(k, previous_action):
     n_envs, size = 2, 40
-    envs = FrameStackEnv(DummyVecEnv([lambda i=i: Counter(i + 1) for i in range(n_envs)]), k)
+    envs = FrameStackEnv(DummyVecEnv([lambda i=i: Counter(i + 1) for i in range(n_envs)]), k,
+                         previous_action)
     buffer = FrameStackReplayBuffer(size, envs.observation_space, envs.action_space,
-                                    device='cpu', n_envs=n_envs, frame_stack=k, n_steps=1)
+                                    device='cpu', n_envs=n_envs, frame_stack=k, n_steps=1,
+                                    previous_action=previous_action)
     assert buffer.observations.frames.shape == (size // n_envs, n_envs, 3, 4, 4)
+    newest = slice(3 * (k - 1), 3 * k)  # the newest frame's channels in a stack
     rows = size // n_envs
     added = {}  # (position, env) -> (stacked obs, stacked next obs) of the newest writes
     stored = [{} for _ in range(n_envs)]  # per env: a frame's time -> the step it was stored
     obs = envs.reset()
+    rng = np.random.default_rng(k)
     for step in range(3 * rows + 5):  # wraps the buffer three times
-        actions = np.array([1] * n_envs)
+        actions = rng.integers(0, 3, n_envs)
         nxt, rewards, dones, infos = envs.step(actions)
         real_next = nxt.copy()
         for e in range(n_envs):
@@ -81,23 +103,29 @@ def test_the_buffer_keeps_single_frames_and_samples_the_stacks_added(k):
         buffer.add(obs, real_next, actions, rewards, dones, infos)
         for e in range(n_envs):
             added[(position, e)] = (obs[e].copy(), real_next[e].copy(), step)
-            stored[e][frame_time(obs[e][-3:])] = step  # the vector step a frame was stored at
+            stored[e][frame_time(obs[e][newest])] = step  # the vector step it was stored at
         obs = nxt
     newest_step = 3 * rows + 4
     checked = 0
     for (position, e), (stacked, stacked_next, _) in added.items():
         got = buffer.observations[np.array([position]), np.array([e])][0]
         got_next = buffer.next_observations[np.array([position]), np.array([e])][0]
-        assert np.array_equal(got_next[-3:], stacked_next[-3:])
-        # every frame of the stack still kept: the stacks acting saw
-        if stored[e][frame_time(stacked[:3])] >= newest_step - rows + 1:
+        assert np.array_equal(got_next[newest], stacked_next[newest])
+        assert np.array_equal(got_next[3 * k:], stacked_next[3 * k:])  # the stored action
+        # every frame of the stack still kept (and the action before the newest, unless none
+        # was taken in its episode yet): the stacks acting saw
+        oldest_kept = newest_step - rows + 1
+        action_kept = (not stacked[3 * k:].any()
+                       or stored[e][frame_time(stacked[newest])] > oldest_kept)
+        if stored[e][frame_time(stacked[:3])] >= oldest_kept and action_kept:
             assert np.array_equal(got, stacked), (position, e)
             assert np.array_equal(got_next, stacked_next), (position, e)
             checked += 1
     assert checked > rows  # most positions are checked
+    channels = 3 * k + 3 * previous_action
     samples = buffer.sample(8)
-    assert samples.observations.shape == (8, 3 * k, 4, 4)
-    assert samples.next_observations.shape == (8, 3 * k, 4, 4)
+    assert samples.observations.shape == (8, channels, 4, 4)
+    assert samples.next_observations.shape == (8, channels, 4, 4)
 
 
 def test_a_dqn_trains_on_stacks_with_a_single_frame_buffer(spaces_only):
@@ -143,5 +171,38 @@ def test_an_actor_of_a_frame_stack_learner_keeps_and_begins_its_history(spaces_o
     firsts = [[int(t[0, c, 0, 0]) for c in (0, 3)] for t in seen]  # the raw uint8 stacks
     assert firsts == [[10, 10], [10, 20], [30, 30]]
     assert all(t.shape == torch.Size([1, 6, 84, 84]) for t in seen)
-    with pytest.raises(PolicyModelError, match='frame-stack learner'):
+    with pytest.raises(PolicyModelError, match='learner with memory'):
         export_policy(tmp_path / 'model.zip', tmp_path / 'export')
+
+
+@pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
+def test_an_actor_feeds_back_its_previous_action_begun_afresh_at_each_episode(spaces_only,
+                                                                               tmp_path):
+    from nav_gym.errors import TrainConfigError
+    from nav_gym.policy.actors import DQNActor
+    from nav_gym.training.config import LearnerSpec, TrainConfig
+    from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy
+
+    spec = LearnerSpec(previous_action=True)  # memory of what it did, one frame
+    model = learner_class(None, spec)(learner_policy(spec), FrameStackEnv(
+        DummyVecEnv([spaces_only]), 1, previous_action=True), buffer_size=200,
+        learning_starts=40, batch_size=8, seed=1, device='cpu', **learner_kwargs(spec, 0.99))
+    model.learn(60)
+    assert model.observation_space.shape == (6, 84, 84) and model._n_updates > 0
+    assert spec.describe().endswith('the previous action as input (Mirowski et al. 2017)')
+    model.save(tmp_path / 'model.zip')
+    actor = DQNActor(tmp_path / 'model.zip')
+    seen = []
+    network = actor.model.q_net
+    actor.model.q_net = lambda tensor: seen.append(tensor.clone()) or network(tensor)
+    frames = [np.full((3, 84, 84), value, np.uint8) for value in (10, 20, 30)]
+    actor.begin_episode(1)
+    first, _ = actor.act(frames[0])
+    actor.act(frames[1])
+    actor.begin_episode(2)
+    actor.act(frames[2])
+    planes = [[int(t[0, 3 + a, 0, 0]) for a in range(3)] for t in seen]  # raw uint8
+    assert planes == [[0, 0, 0], [255 * (a == first) for a in range(3)], [0, 0, 0]]
+    assert [int(t[0, 0, 0, 0]) for t in seen] == [10, 20, 30]
+    with pytest.raises(TrainConfigError, match='memory'):
+        TrainConfig(previous_action=True, prioritized_replay=True)
