@@ -140,23 +140,18 @@ def test_a_dqn_trains_on_stacks_with_a_single_frame_buffer(spaces_only):
     assert model.replay_buffer.observations.frames.shape[2:] == (3, 84, 84)
 
 
-@pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
-def test_an_actor_of_a_frame_stack_learner_keeps_and_begins_its_history(spaces_only, tmp_path):
-    import torch
+def two_episodes(spec, envs, tmp_path):  # noqa: ANN001, ANN201
+    """Train ``spec`` briefly on ``envs``; act as its DQNActor: two frames, a new episode, one.
 
-    from nav_gym.errors import PolicyModelError
+    Returns the model and, per decision, the raw uint8 input its network saw and the action.
+    """
     from nav_gym.policy.actors import DQNActor
-    from nav_gym.policy.export import export_policy
-    from nav_gym.training.config import LearnerSpec
     from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy
-
-    spec = LearnerSpec(frame_stack=2)
-    model = learner_class(None, spec)(learner_policy(spec), FrameStackEnv(
-        DummyVecEnv([spaces_only]), 2), buffer_size=200, learning_starts=40, batch_size=8,
-        seed=1, device='cpu', **learner_kwargs(spec, 0.99))
+    model = learner_class(None, spec)(learner_policy(spec), envs, buffer_size=200,
+                                      learning_starts=40, batch_size=8, seed=1, device='cpu',
+                                      **learner_kwargs(spec, 0.99))
     model.learn(60)
-    assert model._n_updates > 0 and spec.describe().endswith('a 2-frame stack (Hausknecht & '
-                                                             'Stone 2015)')
+    assert model._n_updates > 0
     model.save(tmp_path / 'model.zip')
     actor = DQNActor(tmp_path / 'model.zip')
     seen = []
@@ -164,13 +159,26 @@ def test_an_actor_of_a_frame_stack_learner_keeps_and_begins_its_history(spaces_o
     actor.model.q_net = lambda tensor: seen.append(tensor.clone()) or network(tensor)
     frames = [np.full((3, 84, 84), value, np.uint8) for value in (10, 20, 30)]
     actor.begin_episode(1)
-    actor.act(frames[0])
-    actor.act(frames[1])
+    actions = [actor.act(frames[0])[0], actor.act(frames[1])[0]]
     actor.begin_episode(2)  # a new episode: the history begins again
-    actor.act(frames[2])
-    firsts = [[int(t[0, c, 0, 0]) for c in (0, 3)] for t in seen]  # the raw uint8 stacks
+    actions.append(actor.act(frames[2])[0])
+    return model, list(zip(seen, actions, strict=True))
+
+
+@pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
+def test_an_actor_of_a_frame_stack_learner_keeps_and_begins_its_history(spaces_only, tmp_path):
+    import torch
+
+    from nav_gym.errors import PolicyModelError
+    from nav_gym.policy.export import export_policy
+    from nav_gym.training.config import LearnerSpec
+
+    spec = LearnerSpec(frame_stack=2)
+    _, decisions = two_episodes(spec, FrameStackEnv(DummyVecEnv([spaces_only]), 2), tmp_path)
+    assert spec.describe().endswith('a 2-frame stack (Hausknecht & Stone 2015)')
+    firsts = [[int(t[0, c, 0, 0]) for c in (0, 3)] for t, _ in decisions]  # the raw stacks
     assert firsts == [[10, 10], [10, 20], [30, 30]]
-    assert all(t.shape == torch.Size([1, 6, 84, 84]) for t in seen)
+    assert all(t.shape == torch.Size([1, 6, 84, 84]) for t, _ in decisions)
     with pytest.raises(PolicyModelError, match='learner with memory'):
         export_policy(tmp_path / 'model.zip', tmp_path / 'export')
 
@@ -179,30 +187,16 @@ def test_an_actor_of_a_frame_stack_learner_keeps_and_begins_its_history(spaces_o
 def test_an_actor_feeds_back_its_previous_action_begun_afresh_at_each_episode(spaces_only,
                                                                                tmp_path):
     from nav_gym.errors import TrainConfigError
-    from nav_gym.policy.actors import DQNActor
     from nav_gym.training.config import LearnerSpec, TrainConfig
-    from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy
 
     spec = LearnerSpec(previous_action=True)  # memory of what it did, one frame
-    model = learner_class(None, spec)(learner_policy(spec), FrameStackEnv(
-        DummyVecEnv([spaces_only]), 1, previous_action=True), buffer_size=200,
-        learning_starts=40, batch_size=8, seed=1, device='cpu', **learner_kwargs(spec, 0.99))
-    model.learn(60)
-    assert model.observation_space.shape == (6, 84, 84) and model._n_updates > 0
+    model, decisions = two_episodes(spec, FrameStackEnv(DummyVecEnv([spaces_only]), 1,
+                                                        previous_action=True), tmp_path)
+    assert model.observation_space.shape == (6, 84, 84)
     assert spec.describe().endswith('the previous action as input (Mirowski et al. 2017)')
-    model.save(tmp_path / 'model.zip')
-    actor = DQNActor(tmp_path / 'model.zip')
-    seen = []
-    network = actor.model.q_net
-    actor.model.q_net = lambda tensor: seen.append(tensor.clone()) or network(tensor)
-    frames = [np.full((3, 84, 84), value, np.uint8) for value in (10, 20, 30)]
-    actor.begin_episode(1)
-    first, _ = actor.act(frames[0])
-    actor.act(frames[1])
-    actor.begin_episode(2)
-    actor.act(frames[2])
-    planes = [[int(t[0, 3 + a, 0, 0]) for a in range(3)] for t in seen]  # raw uint8
+    planes = [[int(t[0, 3 + a, 0, 0]) for a in range(3)] for t, _ in decisions]  # raw uint8
+    first = decisions[0][1]
     assert planes == [[0, 0, 0], [255 * (a == first) for a in range(3)], [0, 0, 0]]
-    assert [int(t[0, 0, 0, 0]) for t in seen] == [10, 20, 30]
+    assert [int(t[0, 0, 0, 0]) for t, _ in decisions] == [10, 20, 30]
     with pytest.raises(TrainConfigError, match='memory'):
         TrainConfig(previous_action=True, prioritized_replay=True)
