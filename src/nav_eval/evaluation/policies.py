@@ -84,6 +84,7 @@ class ExploringDQNPolicy(DQNPolicy):
         action, q_values = super().act(observation)
         if self._rng.random() < self.epsilon:
             action = int(self._rng.integers(self.model.action_space.n))
+            self.carried_out(action)  # a memory's previous action is the one taken
         return action, q_values
 
 

@@ -118,6 +118,10 @@ class DQNActor:
         """Start an episode: a frame history begins again at the next observation."""
         self._begun = False
 
+    def carried_out(self, action: int) -> None:
+        """Note the action carried out instead of the greedy one: the memory's previous action."""
+        self._action = int(action)
+
     def act(self, observation: np.ndarray) -> tuple[int, tuple[float, ...]]:
         """Return argmax Q (what ``predict(deterministic=True)`` returns) and the Q-values."""
         import torch

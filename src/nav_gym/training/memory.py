@@ -131,6 +131,8 @@ class FrameStackReplayBuffer(NStepReplayBuffer):
     frame, rebuilt from the actions the buffer keeps.
     """
 
+    n_actions = 0  # a buffer pickled before the previous action existed has none
+
     def __init__(self, buffer_size: int, observation_space: spaces.Box,
                  action_space: spaces.Discrete, *args: Any, frame_stack: int = 1,
                  previous_action: bool = False, **kwargs: Any) -> None:

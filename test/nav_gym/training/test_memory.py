@@ -198,5 +198,17 @@ def test_an_actor_feeds_back_its_previous_action_begun_afresh_at_each_episode(sp
     first = decisions[0][1]
     assert planes == [[0, 0, 0], [255 * (a == first) for a in range(3)], [0, 0, 0]]
     assert [int(t[0, 0, 0, 0]) for t, _ in decisions] == [10, 20, 30]
+    # exploring, the action taken is the previous one, not the greedy one it replaced
+    from nav_eval.evaluation.policies import ExploringDQNPolicy
+    explorer = ExploringDQNPolicy(tmp_path / 'model.zip', epsilon=1.0)
+    seen = []
+    network = explorer.model.q_net
+    explorer.model.q_net = lambda tensor: seen.append(tensor.clone()) or network(tensor)
+    explorer.begin_episode(3)
+    taken = [explorer.act(np.full((3, 84, 84), 10 * i, np.uint8))[0] for i in range(8)]
+    greedy = [int(network(t).argmax()) for t in seen]
+    assert taken != greedy  # the probe: some random action replaced the greedy one
+    assert [[int(t[0, 3 + a, 0, 0]) for a in range(3)] for t in seen[1:]] == [
+        [255 * (a == action) for a in range(3)] for action in taken[:-1]]
     with pytest.raises(TrainConfigError, match='memory'):
         TrainConfig(previous_action=True, prioritized_replay=True)
