@@ -6,6 +6,8 @@ import zipfile
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from nav_gym.errors import CheckpointError
 from nav_gym.training.config import LearnerSpec, TrainConfig
 from nav_gym.training.files import atomic_write, write_text
@@ -21,6 +23,25 @@ from nav_gym.training.run_dir import (
 def buffer_nbytes(buffer: Any) -> int:
     """Return the bytes a replay buffer's arrays hold (what saving it needs, roughly)."""
     return sum(int(getattr(value, 'nbytes', 0)) for value in vars(buffer).values())
+
+
+def cut_at_resume(buffer: Any) -> None:
+    """End each env's last stored episode at the newest transition, as a time-out.
+
+    A resumed run starts new episodes (its envs reset), but the saved buffer's newest transition
+    of an env whose episode was still running says "not done".  Uncut, SB3's n-step returns
+    would add the new episode's rewards to the old episode's last transition, and the agent's
+    memory (frame stacks, the previous action) would join the two episodes.  An episode cut
+    by the interruption is a time-out: it bootstraps from its stored next observation, as
+    SB3 does at a time limit (``handle_timeout_termination``).  A buffer that does not handle
+    time-outs is left as it is.
+    """
+    if buffer.size() == 0 or not getattr(buffer, 'handle_timeout_termination', False):
+        return
+    last = (buffer.pos - 1) % buffer.buffer_size
+    running = buffer.dones[last] == 0
+    buffer.timeouts[last] = np.where(running, 1, buffer.timeouts[last])
+    buffer.dones[last] = np.where(running, 1, buffer.dones[last])
 
 
 def save_checkpoint(model: Any, run_dir: Path, with_buffer: bool) -> Path:

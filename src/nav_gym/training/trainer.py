@@ -17,6 +17,7 @@ from nav_gym.env.navigation import NavigationEnv
 from nav_gym.errors import CheckpointError, DiskFullError, TrainConfigError, TrainingError
 from nav_gym.training import config as train_config
 from nav_gym.training.checkpoints import (
+    cut_at_resume,
     delete_replay_buffer,
     load_model,
     make_callback,
@@ -118,6 +119,7 @@ def build_model(config: TrainConfig, run_dir: Path, env: Any, resume: bool) -> A
         except Exception as exc:  # pickle/EOF/shape errors all mean the same to the user
             raise CheckpointError(f'replay buffer {buffer} is corrupt ({exc}); delete it to '
                                   'resume without it') from exc
+        cut_at_resume(model.replay_buffer)  # the envs start new episodes
         note = f'with its replay buffer ({model.replay_buffer.size()} transitions)'
     else:
         note = 'without a replay buffer'

@@ -212,3 +212,43 @@ def test_an_actor_feeds_back_its_previous_action_begun_afresh_at_each_episode(sp
         [255 * (a == action) for a in range(3)] for action in taken[:-1]]
     with pytest.raises(TrainConfigError, match='memory'):
         TrainConfig(previous_action=True, prioritized_replay=True)
+
+
+def test_a_resume_ends_the_running_episodes_for_n_step_returns_and_memory():
+    """A resumed run's envs start new episodes: the buffer's newest transitions end there.
+
+    A running episode ends as a time-out (bootstrapped), an ended one stays as it was; the new
+    episode's first stack begins afresh, and no n-step return reaches across.
+    """
+    from nav_gym.training.checkpoints import cut_at_resume
+    n_envs, gamma = 2, 0.9
+    envs = FrameStackEnv(DummyVecEnv([lambda i=i: Counter(i + 7) for i in range(n_envs)]), 2,
+                         previous_action=True)
+    buffer = FrameStackReplayBuffer(40, envs.observation_space, envs.action_space,
+                                    device='cpu', n_envs=n_envs, frame_stack=2, n_steps=3,
+                                    gamma=gamma, previous_action=True)
+    obs = envs.reset()
+    for _ in range(6):
+        actions = np.array([2, 0])
+        nxt, rewards, _, _ = envs.step(actions)
+        dones = np.zeros(n_envs, bool)  # every episode still running at the save ...
+        buffer.add(obs, nxt, actions, rewards, dones, [{} for _ in range(n_envs)])
+        obs = nxt
+    last = buffer.pos - 1
+    buffer.dones[last, 1] = 1.0  # ... but env 1's, which has just ended (terminated)
+    cut_at_resume(buffer)
+    assert list(buffer.dones[last]) == [1.0, 1.0] and list(buffer.timeouts[last]) == [1.0, 0.0]
+    obs = envs.reset()  # the resumed run: new episodes
+    nxt, rewards, dones, infos = envs.step(np.array([1, 1]))
+    buffer.add(obs, nxt, np.array([1, 1]), rewards, dones, infos)
+    first = buffer.observations[np.array([buffer.pos - 1] * 2), np.arange(n_envs)]
+    assert np.array_equal(first, obs)  # begun afresh: the first frame twice, no action
+    assert not first[:, 6:].any()
+    np.random.seed(0)
+    sampled_envs = np.random.randint(0, n_envs, 8)  # the envs SB3 draws below
+    np.random.seed(0)
+    samples = buffer._get_samples(np.array([last] * 8))
+    assert set(sampled_envs) == {0, 1}
+    assert np.allclose(samples.discounts.numpy(), gamma)  # one step, then the cut
+    # env 0 was cut (a time-out: bootstrapped), env 1 terminated (not)
+    assert list(samples.dones.numpy().reshape(-1)) == [float(e == 1) for e in sampled_envs]
