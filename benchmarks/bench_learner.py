@@ -96,10 +96,20 @@ class SpacesOnly(gym.Env):
 
 
 def build(config: train_config.TrainConfig) -> Any:
-    """Build the config's learner on the spaces-only env and fill its replay buffer."""
+    """Build the config's learner on the spaces-only env and fill its replay buffer.
+
+    A learner with memory gets the agent's stacks (``FrameStackEnv``), as in training.
+    """
     learner = config.learner()
+    env: Any = SpacesOnly()
+    if learner.memory:
+        from stable_baselines3.common.vec_env import DummyVecEnv
+
+        from nav_gym.training.memory import FrameStackEnv
+        env = FrameStackEnv(DummyVecEnv([SpacesOnly]), learner.frame_stack,
+                            learner.previous_action)
     model = learner_class(None, learner)(
-        learner_policy(learner), SpacesOnly(),
+        learner_policy(learner), env,
         **{**config.dqn_kwargs(), 'buffer_size': 10_000, 'device': 'cpu'},
         **learner_kwargs(learner, config.gamma))
     model.learn(config.learning_starts + 1)
@@ -148,6 +158,9 @@ class Floor:
         self.obs = np.frombuffer(rng.bytes(int(np.prod(shape))), np.uint8).reshape(shape)
         self.next_obs = np.frombuffer(rng.bytes(int(np.prod(shape))), np.uint8).reshape(shape)
         self.actions = rng.integers(0, 3, FLOOR_BUFFER)
+        # a learner with memory: its stacks composed from the single frames at sampling time
+        self.k = self.learner.frame_stack
+        self.planes = 3 if self.learner.previous_action else 0
         n = self.learner.n_steps  # n-step returns and their discounts, precomputed
         self.returns = rng.normal(size=FLOOR_BUFFER).astype(np.float32)
         self.discounts = np.full(FLOOR_BUFFER, config.gamma ** n, np.float32)
@@ -159,7 +172,8 @@ class Floor:
         clock = time.perf_counter
         t0 = clock()
         index = self.rng.integers(0, FLOOR_BUFFER, batch)
-        obs, next_obs = torch.from_numpy(self.obs[index]), torch.from_numpy(self.next_obs[index])
+        obs = torch.from_numpy(self.stacks(self.obs, index, self.actions[index - 1]))
+        next_obs = torch.from_numpy(self.stacks(self.next_obs, index, self.actions[index]))
         actions = torch.from_numpy(self.actions[index]).reshape(-1, 1)
         returns = torch.from_numpy(self.returns[index]).reshape(-1, 1)
         discounts = torch.from_numpy(self.discounts[index]).reshape(-1, 1)
@@ -189,6 +203,17 @@ class Floor:
         for phase, span in zip(FLOOR_PHASES, (t1 - t0, t2 - t1, t3 - t2, t4 - t3, t5 - t4,
                                               t6 - t5), strict=True):
             seconds[phase] += span
+
+    def stacks(self, frames: np.ndarray, index: np.ndarray, before: np.ndarray) -> np.ndarray:
+        """Return the observations at ``index``: the frame, or its stack and action planes."""
+        if self.k == 1 and not self.planes:
+            return frames[index]
+        parts = [frames[(index - j) % FLOOR_BUFFER] for j in range(self.k - 1, -1, -1)]
+        if self.planes:
+            hot = (before[:, None] == np.arange(self.planes)).astype(np.uint8) * 255
+            parts.append(np.broadcast_to(hot[:, :, None, None],
+                                         (len(index), self.planes, *OBS_SHAPE[1:])))
+        return np.concatenate(parts, axis=1)
 
     def time_steps(self, steps: int, batch: int, seconds: dict[str, float]) -> float:
         """Return the wall-clock ms per step of ``steps`` floor steps."""
