@@ -54,6 +54,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from nav_gym.env.observation import OBS_SHAPE  # noqa: E402
+from nav_gym.policy.history import action_planes  # noqa: E402
 from nav_gym.training import config as train_config  # noqa: E402
 from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy  # noqa: E402
 from nav_gym.training.run_dir import SUMMARY  # noqa: E402
@@ -210,9 +211,7 @@ class Floor:
             return frames[index]
         parts = [frames[(index - j) % FLOOR_BUFFER] for j in range(self.k - 1, -1, -1)]
         if self.planes:
-            hot = (before[:, None] == np.arange(self.planes)).astype(np.uint8) * 255
-            parts.append(np.broadcast_to(hot[:, :, None, None],
-                                         (len(index), self.planes, *OBS_SHAPE[1:])))
+            parts.append(action_planes(before, self.planes, OBS_SHAPE[1:]))
         return np.concatenate(parts, axis=1)
 
     def time_steps(self, steps: int, batch: int, seconds: dict[str, float]) -> float:
