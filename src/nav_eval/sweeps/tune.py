@@ -19,6 +19,8 @@ from pathlib import Path
 from typing import Any
 
 from ray import tune
+from ray.tune.experiment import Trial
+from ray.tune.schedulers import FIFOScheduler
 
 from nav_eval.evaluation.sets import BASELINE_POLICIES
 from nav_eval.sweeps.spec import TUNE
@@ -49,6 +51,33 @@ def _name(trial: Any) -> str:
 
 def _percent(value: Any) -> str:
     return '–' if value is None else f'{100 * float(value):.0f}%'
+
+
+class StartedFirst(FIFOScheduler):
+    """Run the trials an earlier session started before those it never reached, each in order.
+
+    Tune restores a sweep's trials in no set order (its state keeps them in a set) and its FIFO
+    scheduler takes the first one pending: a resumed sweep would start a fresh trial while a
+    half-trained one waited, and each stopped session would leave one more trial half done.
+    A trial has started when its log exists; ties go by the sweep's order (``order``: names).
+    """
+
+    def __init__(self, order: list[str]) -> None:
+        super().__init__()
+        self.rank = {name: i for i, name in enumerate(order)}
+
+    def _key(self, trial: Any) -> tuple[bool, int]:
+        spec = (trial.config or {}).get('trial') or {}
+        started = bool(spec.get('log')) and Path(spec['log']).is_file()
+        return not started, self.rank.get(spec.get('name'), len(self.rank))
+
+    def choose_trial_to_run(self, tune_controller: Any) -> Any:
+        """Return the pending (else paused) trial to run next: started ones first."""
+        for status in (Trial.PENDING, Trial.PAUSED):
+            ready = [t for t in tune_controller.get_trials() if t.status == status]
+            if ready:
+                return min(ready, key=self._key)
+        return None
 
 
 class ProgressLines(tune.Callback):
@@ -187,15 +216,19 @@ def _tuner(spec: Any, trials: list[dict[str, Any]], resume: bool, retry_failed: 
     resources = {'cpu': spec.cpus_per_trial, 'gpu': spec.gpus_per_trial}
     fn = tune.with_resources(trainable, resources)
     progress = ProgressLines(trials, done)
+    scheduler = StartedFirst([t['name'] for t in trials])
     path = str(Path(spec.sweep_dir) / TUNE)
     if resume and tune.Tuner.can_restore(path):
         tuner = tune.Tuner.restore(path, fn, resume_unfinished=True, resume_errored=False,
                                    restart_errored=retry_failed)
-        # the restored run config holds the pickled callback of the first session: a fresh one
-        # (Tuner.restore takes no run config; this is its only handle)
+        # the restored configs hold the pickled callback and scheduler of the first session (or
+        # none, for a sweep from before StartedFirst): fresh ones (Tuner.restore takes neither
+        # config; this is its only handle)
         local = getattr(tuner, '_local_tuner', None)
         if local is not None and hasattr(local, '_run_config'):
             local._run_config.callbacks = [progress]
+        if local is not None and hasattr(local, '_tune_config'):
+            local._tune_config.scheduler = scheduler
         return tuner, progress
     run_config = tune.RunConfig(
         name=TUNE, storage_path=spec.sweep_dir, verbose=0, callbacks=[progress],
@@ -203,7 +236,8 @@ def _tuner(spec: Any, trials: list[dict[str, Any]], resume: bool, retry_failed: 
         checkpoint_config=tune.CheckpointConfig(num_to_keep=1))
     tuner = tune.Tuner(fn, param_space={'trial': tune.grid_search(trials)},
                        tune_config=tune.TuneConfig(num_samples=1, reuse_actors=True,
-                                                   trial_dirname_creator=_dirname),
+                                                   trial_dirname_creator=_dirname,
+                                                   scheduler=scheduler),
                        run_config=run_config)
     return tuner, progress
 

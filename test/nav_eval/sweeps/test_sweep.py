@@ -285,6 +285,12 @@ def test_ctrl_c_leaves_no_process_and_a_resumable_sweep(tmp_path):
         for pid in below:  # clean up before failing, so a failure leaves nothing behind
             if running(pid):
                 os.kill(pid, signal.SIGKILL)
+    # resumed, the sweep schedules its started trials first, whatever order Tune restores
+    from nav_eval.sweeps.spec import load_spec
+    from nav_eval.sweeps.tune import StartedFirst, _tuner
+    resumed = load_spec(folder)
+    tuner, _ = _tuner(resumed, resumed.trials(), True, False, set())
+    assert isinstance(tuner._local_tuner._tune_config.scheduler, StartedFirst)
     spec = json.loads((folder / 'sweep.json').read_text())
     for seed in (1, 2):
         trial = {'run_dir': str(folder / 'trials' / f'seed{seed}'), 'gpus': 0,
@@ -292,6 +298,27 @@ def test_ctrl_c_leaves_no_process_and_a_resumable_sweep(tmp_path):
         assert '--resume' in train_args(trial)  # continues from its newest checkpoint
     assert spec['seeds'] == [1, 2, 3]
     assert not (folder / 'trials' / 'seed3').exists()
+
+
+def test_a_resumed_sweep_runs_the_trials_it_started_first(tmp_path):
+    from types import SimpleNamespace
+
+    from nav_eval.sweeps.tune import StartedFirst
+    trials = [{'name': f'seed{i}', 'log': str(tmp_path / f'seed{i}.log')} for i in (1, 2, 3, 4)]
+    order = [t['name'] for t in trials]
+    # Tune restores them in no set order; seed3 ran in an earlier session, seed4 is running
+    fake = [SimpleNamespace(config={'trial': trials[i]}, status=status)
+            for i, status in ((1, 'PENDING'), (3, 'RUNNING'), (2, 'PENDING'), (0, 'PENDING'))]
+    controller = SimpleNamespace(get_trials=lambda: fake)
+    scheduler = StartedFirst(order)
+    assert scheduler.choose_trial_to_run(controller).config['trial']['name'] == 'seed1'
+    Path(trials[2]['log']).write_text('# attempt at ...\n')  # seed3 had started
+    assert scheduler.choose_trial_to_run(controller).config['trial']['name'] == 'seed3'
+    for trial in fake:
+        trial.status = 'TERMINATED' if trial.status == 'PENDING' else trial.status
+    assert scheduler.choose_trial_to_run(controller) is None
+    fake[0].status = 'PAUSED'
+    assert scheduler.choose_trial_to_run(controller) is fake[0]
 
 
 def test_eta_times_each_kind_of_trial_on_its_own():
