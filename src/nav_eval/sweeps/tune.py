@@ -63,6 +63,7 @@ class StartedFirst(FIFOScheduler):
     """
 
     def __init__(self, order: list[str]) -> None:
+        """Rank the trials by ``order`` (their names, in the sweep's order)."""
         super().__init__()
         self.rank = {name: i for i, name in enumerate(order)}
 
