@@ -2,7 +2,8 @@
 
 Observation: the camera image only, ``Box(0, 255, (3, 84, 84), uint8)``.  Actions:
 ``Discrete(3)`` = 0 turn left, 1 forward, 2 turn right, sent as ``cmd_vel`` Twists.  Pose, goal,
-distance and the scenario go to ``info`` and the reward, never to the policy.
+distance, the scenario and the camera's coarse depth (a training target,
+``nav_sim.core.depth``) go to ``info`` and the reward, never to the policy.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from nav_gym.env.reward import reward_terms
 from nav_gym.errors import InvalidActionError, ResetNeededError
 from nav_sim import interface
 from nav_sim.core.config import normalise_split, validate_seed
+from nav_sim.core.depth import DEPTH_KEY, parse_depth
 from nav_sim.core.events import EVENT_GOAL, TERMINAL_EVENTS
 from nav_sim.core.step_timing import StepTiming
 from nav_sim.core.world import load_arena
@@ -156,6 +158,7 @@ class NavigationEnv(gym.Env):
         info = {'scenario': scenario, 'seed': int(scenario_seed), 'split': split,
                 'distance': self.previous_distance, 'pose': frame.pose,
                 'goal': tuple(scenario['goal']), 'episode': frame.event['episode']}
+        _add_depth(info, frame)
         for observer in self.observers:
             observer.on_reset(frame.stamp_ns, self._rgb, self._obs, info)
         return obs, info
@@ -191,6 +194,7 @@ class NavigationEnv(gym.Env):
             # wheel speeds the sim reports at the end of the period (0 after goal/collision)
             'wheels': [float(frame.event['wheel_left']), float(frame.event['wheel_right'])],
         }
+        _add_depth(info, frame)
         if terminated or truncated:
             self._episode_over = True
             info['wheels_after_stop'] = self.stop_motors()
@@ -331,6 +335,13 @@ class NavigationEnv(gym.Env):
             self.stop_sim()
         except Exception:
             pass
+
+
+def _add_depth(info: dict[str, Any], frame: Frame) -> None:
+    """Put the frame's coarse depth in ``info`` (``nav_sim.core.depth``): a training target."""
+    text = frame.event.get(DEPTH_KEY)
+    if text is not None:
+        info[DEPTH_KEY] = parse_depth(text)
 
 
 def _sim_answers(client: SimClient, probe_timeout: float, sim_timeout: float) -> bool:

@@ -182,6 +182,10 @@ class NavSim:
         """Render the camera image (height, width, 3) uint8 RGB of the current state."""
         return self.world.render_camera()
 
+    def depth(self) -> np.ndarray:
+        """Return the camera's coarse depth of the current state (``nav_sim.core.depth``)."""
+        return self.world.camera_depth()
+
     def close(self) -> None:
         """Free the renderer and the model."""
         self.world.close()

@@ -27,6 +27,7 @@ from nav_sim.core.contract import (
     shown_material,
 )
 from nav_sim.core.contract import load_world as load_checked
+from nav_sim.core.depth import DEPTH_RANGE, DEPTH_SHAPE, cell_rays
 from nav_sim.core.geometry import ArenaGeometry, Layout
 from nav_sim.core.looks import Look
 
@@ -49,6 +50,10 @@ class World:
         self.geometry = read_arena(self.model)
         self._plain_look = self._look_state()
         self._renderer: mujoco.Renderer | None = None
+        self._depth_rays = cell_rays(config.camera_hfov_deg, config.camera_width,
+                                     config.camera_height)
+        self._ray_geoms = np.zeros(len(self._depth_rays), np.int32)
+        self._ray_distances = np.zeros(len(self._depth_rays))
 
     def _configure_model(self) -> None:
         m, cfg = self.model, self.config
@@ -202,6 +207,21 @@ class World:
         r = self.renderer()
         r.update_scene(self.data, camera=self.camera_id)
         return r.render()
+
+    def camera_depth(self) -> np.ndarray:
+        """Return the camera's coarse depth, ``DEPTH_SHAPE`` float32 (``nav_sim.core.depth``).
+
+        One ray per cell from the camera through the cell's centre (MuJoCo's ``mj_multiRay``
+        over every geom, as the camera renders them), on the poses of the last forward pass.
+        """
+        m, d, cam = self.model, self.data, self.camera_id
+        rays = self._depth_rays @ d.cam_xmat[cam].reshape(3, 3).T  # camera to world frame
+        lengths = np.linalg.norm(rays, axis=1)
+        mujoco.mj_multiRay(m, d, d.cam_xpos[cam].copy(), (rays / lengths[:, None]).ravel(),
+                           None, 1, -1, self._ray_geoms, self._ray_distances,
+                           None, len(rays), DEPTH_RANGE * float(lengths.max()))
+        depth = np.where(self._ray_geoms >= 0, self._ray_distances / lengths, DEPTH_RANGE)
+        return np.minimum(depth, DEPTH_RANGE).astype(np.float32).reshape(DEPTH_SHAPE)
 
     def close(self) -> None:
         """Release the renderer, if one was created."""

@@ -27,6 +27,7 @@ from std_srvs.srv import Trigger
 
 from nav_sim import interface
 from nav_sim.core.config import SimConfig, normalise_split, validate_seed
+from nav_sim.core.depth import DEPTH_KEY, depth_text
 from nav_sim.core.events import EVENT_NONE
 from nav_sim.core.kinematics import WheelCommand, twist_to_wheels
 from nav_sim.core.sim import NavSim
@@ -325,6 +326,8 @@ class SimNode(Node):
             'x': pose[0], 'y': pose[1], 'yaw': pose[2], 'linear': twist[0], 'angular': twist[1],
             'wheel_left': sim.wheels.left, 'wheel_right': sim.wheels.right,
             'path_length': sim.path_length,
+            # privileged, as the pose: a training target (nav_sim.core.depth), never an input
+            DEPTH_KEY: depth_text(sim.depth()),
         }
 
     def destroy_node(self) -> None:

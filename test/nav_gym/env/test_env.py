@@ -38,11 +38,19 @@ def test_spaces_and_observations(env):
     obs, info = env.reset(seed=101)
     assert obs.shape == (3, 84, 84) and obs.dtype == np.uint8
     assert env.observation_space.contains(obs)
-    assert set(info) >= {'scenario', 'distance', 'pose', 'goal', 'seed', 'split'}
+    assert set(info) >= {'scenario', 'distance', 'pose', 'goal', 'seed', 'split', 'depth'}
+    depths = [info['depth']]
     for action in (0, 1, 2):
         obs, reward, terminated, truncated, info = env.step(action)
         assert env.observation_space.contains(obs)
         assert isinstance(reward, float) and isinstance(terminated, bool)
+        depths.append(info['depth'])
+    # the camera's coarse depth, a training target beside the observation (nav_sim.core.depth)
+    from nav_sim.core.depth import DEPTH_RANGE, DEPTH_SHAPE
+    for depth in depths:
+        assert depth.shape == DEPTH_SHAPE and depth.dtype == np.float32
+        assert (depth > 0).all() and (depth <= DEPTH_RANGE).all()
+    assert not np.array_equal(depths[0], depths[1])  # a turn changes what the camera sees
 
 
 def test_both_checkers_pass_without_warnings(env):

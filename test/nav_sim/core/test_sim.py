@@ -61,6 +61,61 @@ def test_the_camera_sits_and_looks_where_configured(mount):
         sim.close()
 
 
+@pytest.mark.parametrize('mount', [
+    {},
+    {'camera_mount_forward': 0.038, 'camera_mount_height': 0.0455, 'camera_pitch_deg': 0.0,
+     'camera_hfov_deg': 48.0},
+])
+def test_the_coarse_depth_is_the_cameras_rendered_depth_at_its_cells(mount):
+    import mujoco
+
+    from nav_sim.core.depth import DEPTH_RANGE, DEPTH_SHAPE, depth_text, parse_depth
+    config = SimConfig(world='clutter.xml', **mount)
+    sim = NavSim(config)
+    renderer = mujoco.Renderer(sim.world.model, config.camera_height, config.camera_width)
+    renderer.enable_depth_rendering()
+    rows, cols = DEPTH_SHAPE
+    # each cell's centre lies between four pixels: compare where they agree (not an edge)
+    y = np.floor((np.arange(rows) + 0.5) / rows * config.camera_height - 0.5).astype(int)
+    x = np.floor((np.arange(cols) + 0.5) / cols * config.camera_width - 0.5).astype(int)
+    compared = 0
+    try:
+        for seed in range(6):
+            sim.reset(seed, 'train')
+            renderer.update_scene(sim.world.data, camera=sim.world.camera_id)
+            image = np.minimum(renderer.render(), DEPTH_RANGE)
+            around = np.stack([image[np.ix_(y + dy, x + dx)] for dy in (0, 1) for dx in (0, 1)])
+            depth = sim.depth()
+            assert depth.shape == DEPTH_SHAPE and depth.dtype == np.float32
+            assert (depth > 0).all() and (depth <= DEPTH_RANGE).all()
+            smooth = around.max(axis=0) - around.min(axis=0) < 0.1 * around.min(axis=0)
+            np.testing.assert_allclose(depth[smooth], around.mean(axis=0)[smooth], rtol=0.02)
+            compared += int(smooth.sum())
+            # the event carries it as text, to the millimetre
+            np.testing.assert_allclose(parse_depth(depth_text(depth)), depth, atol=5e-4)
+    finally:
+        renderer.close()
+        sim.close()
+    assert compared > 0.8 * 6 * rows * cols  # the comparison saw most cells
+    with pytest.raises(ValueError, match='64 cells, got 3'):
+        parse_depth('1 2 3')
+
+
+def test_the_coarse_depth_sees_a_wall_ahead_at_its_distance(sim):
+    from nav_sim.core.depth import DEPTH_RANGE
+    place(sim, 0.5, 0.0, 0.0, goal=(-0.5, 0.5))  # facing +x; the wall's face at x = 1.0
+    before = sim.depth()
+    # the top row's centre ray is above the horizontal: it meets the wall, whose z-depth on
+    # the camera's tilted axis is the distance times cos(pitch) over cos of the ray's offset
+    assert before[0].max() < DEPTH_RANGE
+    sim.world.set_robot_pose(0.8, 0.0, 0.0)
+    import mujoco
+    mujoco.mj_forward(sim.world.model, sim.world.data)
+    after = sim.depth()
+    assert (after[0] < before[0] - 0.2).all()  # 30 cm closer: every top cell nearer
+    np.testing.assert_allclose(after[2:], before[2:], atol=0.02)  # the floor just ahead: the same
+
+
 def test_same_seed_gives_bit_identical_first_image():
     a, b = NavSim(), NavSim()
     try:
