@@ -42,7 +42,8 @@ _ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
 DEVICE = re.compile(r'auto|cpu|cuda(:\d+)?')
 #: the components' flags (LearnerSpec fields), each with its value that turns the component off
 COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0,
-              'prioritized_replay': False, 'frame_stack': 1, 'previous_action': False}
+              'prioritized_replay': False, 'frame_stack': 1, 'previous_action': False,
+              'aux_depth': 0.0}
 
 
 def vector_schedule(train_freq: int, gradient_steps: int, n_envs: int) -> tuple[int, int]:
@@ -96,6 +97,11 @@ class LearnerSpec:
     previous_action: bool = setting(False, "the agent's memory of what it did: the action that "
                                     'led to the latest frame as one-hot input planes after the '
                                     'frames, none at an episode start (Mirowski et al. 2017)')
+    aux_depth: float = setting(0.0, 'weight of an auxiliary loss: a linear head on the online '
+                               "network's features predicts the camera's coarse depth of each "
+                               "sampled observation (info['depth'], a 4 x 16 grid; Mirowski et "
+                               'al. 2017, UNREAL), a training signal only: acting never uses '
+                               'the head; 0: off', NON_NEGATIVE)
     priority_alpha: float = setting(0.6, 'prioritized replay: priority = (|TD error| + '
                                     'eps)^alpha', FRACTION)
     priority_beta: float = setting(0.4, 'prioritized replay: importance-weight exponent at the '
@@ -134,6 +140,9 @@ class LearnerSpec:
             parts.append(f'a {self.frame_stack}-frame stack (Hausknecht & Stone 2015)')
         if self.previous_action:
             parts.append('the previous action as input (Mirowski et al. 2017)')
+        if self.aux_depth:
+            parts.append(f'an auxiliary depth loss of weight {self.aux_depth:g} (Mirowski et al. '
+                         '2017)')
         if self.prioritized_replay:
             parts.append(f'prioritized replay (Schaul et al. 2016, alpha {self.priority_alpha}, '
                          f'beta {self.priority_beta} to 1)')
@@ -187,6 +196,7 @@ class TrainConfig:
     prioritized_replay: bool = _learner('prioritized_replay')
     frame_stack: int = _learner('frame_stack')
     previous_action: bool = _learner('previous_action')
+    aux_depth: float = _learner('aux_depth')
     priority_alpha: float = _learner('priority_alpha')
     priority_beta: float = _learner('priority_beta')
     checkpoint_freq: int = setting(10_000, 'steps between checkpoints (all are kept)',

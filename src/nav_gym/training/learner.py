@@ -17,7 +17,11 @@ own ``DQN`` untouched (the workshop's learner, bit for bit: config/workshop.yaml
 - ``prioritized_replay``: proportional prioritized replay with importance weights (Schaul et
   al. 2016);
 - ``frame_stack``: the agent's last k frames as its input, replayed from single frames
-  (:mod:`nav_gym.training.memory`; DRQN's comparison, Hausknecht & Stone 2015).
+  (:mod:`nav_gym.training.memory`; DRQN's comparison, Hausknecht & Stone 2015);
+- ``aux_depth``: an auxiliary loss of this weight, a linear head on the online network's
+  features predicting the camera's coarse depth of each sampled observation (Mirowski et al.
+  2017; UNREAL, Jaderberg et al. 2017); the targets come from ``info['depth']`` into a buffer
+  of their own (:class:`DepthTargets`), and acting never uses the head.
 
 Everything else is SB3's: network, replay, exploration, target updates, the saved model format
 (a checkpoint of any of these loads with ``DQN.load``).  One change is not a component but how
@@ -43,6 +47,14 @@ from stable_baselines3.dqn.policies import CnnPolicy, QNetwork
 from torch import nn
 from torch.nn import functional as F
 
+from nav_gym.training.aux_depth import (
+    DepthCnnPolicy,
+    DepthFrameStackReplayBuffer,
+    DepthReplayBuffer,
+    DepthTargets,
+    add_depth_head,
+    depth_loss,
+)
 from nav_gym.training.config import LearnerSpec
 from nav_gym.training.memory import FrameStackReplayBuffer
 
@@ -118,6 +130,22 @@ class DuelingCnnPolicy(CnnPolicy):
         """Return a :class:`DuelingQNetwork` with its own features extractor."""
         net_args = self._update_features_extractor(self.net_args, features_extractor=None)
         return DuelingQNetwork(**net_args).to(self.device)
+
+
+def q_and_features(net: QNetwork, obs: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+    """Return a Q-network's values and the features they come from, in one forward pass."""
+    features = net.extract_features(obs, net.features_extractor)
+    if isinstance(net, DuelingQNetwork):
+        return dueling_q(net.value_net(features), net.q_net(features)), features
+    return net.q_net(features), features
+
+
+class DepthDuelingCnnPolicy(DuelingCnnPolicy):
+    """The dueling policy whose Q-networks also carry the auxiliary depth head."""
+
+    def make_q_net(self) -> QNetwork:
+        """Return the dueling Q-network with a depth head."""
+        return add_depth_head(super().make_q_net())
 
 
 class SumTree:
@@ -208,6 +236,10 @@ class PrioritizedReplayBuffer(NStepReplayBuffer):
         self.priorities.set(indices, priorities ** self.alpha)
 
 
+class DepthPrioritizedReplayBuffer(DepthTargets, PrioritizedReplayBuffer):
+    """Prioritized replay with depth targets."""
+
+
 class Learner(DQN):
     """SB3's DQN whose gradient step adds the Double DQN target and the enabled components.
 
@@ -230,7 +262,7 @@ class Learner(DQN):
         if prioritized:  # beta anneals linearly to 1 over training (Schaul et al.)
             progress = 1.0 - self._current_progress_remaining
             buffer.beta = spec.priority_beta + (1.0 - spec.priority_beta) * progress
-        losses = []
+        losses, depth_losses = [], []
         for _ in range(gradient_steps):
             data = buffer.sample(batch_size, env=self._vec_normalize_env)
             discounts = data.discounts if data.discounts is not None else self.gamma
@@ -245,7 +277,11 @@ class Learner(DQN):
                                              self.q_net(next_obs), next_q_target)
                 else:
                     target = max_q_target(data.rewards, data.dones, discounts, next_q_target)
-            current = th.gather(self.q_net(obs), dim=1, index=data.actions.long())
+            if spec.aux_depth:
+                values, features = q_and_features(self.q_net, obs)
+            else:
+                values = self.q_net(obs)
+            current = th.gather(values, dim=1, index=data.actions.long())
             if prioritized:
                 weights = th.as_tensor(buffer.last_weights, device=self.device).reshape(-1, 1)
                 loss = (weights * F.smooth_l1_loss(current, target, reduction='none')).mean()
@@ -253,6 +289,11 @@ class Learner(DQN):
                                          (current - target).detach().reshape(-1).cpu().numpy())
             else:
                 loss = F.smooth_l1_loss(current, target)
+            if spec.aux_depth:
+                targets = th.as_tensor(buffer.last_depths, device=self.device)
+                aux = depth_loss(self.q_net, features, targets)
+                depth_losses.append(aux.item())
+                loss = loss + spec.aux_depth * aux
             losses.append(loss.item())
             self.policy.optimizer.zero_grad()
             loss.backward()
@@ -261,6 +302,8 @@ class Learner(DQN):
         self._n_updates += gradient_steps
         self.logger.record('train/n_updates', self._n_updates, exclude='tensorboard')
         self.logger.record('train/loss', np.mean(losses))
+        if depth_losses:
+            self.logger.record('train/depth_loss', np.mean(depth_losses))
 
 
 def learner_kwargs(spec: LearnerSpec, gamma: float) -> dict[str, Any]:
@@ -273,16 +316,22 @@ def learner_kwargs(spec: LearnerSpec, gamma: float) -> dict[str, Any]:
         return {}
     kwargs: dict[str, Any] = {'policy_kwargs': {'optimizer_kwargs': {'fused': True}},
                               'learner': spec}
+    depth = bool(spec.aux_depth)
     if spec.memory:  # single frames in the buffer, stacks rebuilt at sample time
-        kwargs['replay_buffer_class'] = FrameStackReplayBuffer
+        kwargs['replay_buffer_class'] = (DepthFrameStackReplayBuffer if depth
+                                         else FrameStackReplayBuffer)
         kwargs['replay_buffer_kwargs'] = {'frame_stack': spec.frame_stack,
                                           'previous_action': spec.previous_action,
                                           'n_steps': spec.n_steps, 'gamma': gamma}
     elif spec.prioritized_replay:
-        kwargs['replay_buffer_class'] = PrioritizedReplayBuffer
+        kwargs['replay_buffer_class'] = (DepthPrioritizedReplayBuffer if depth
+                                         else PrioritizedReplayBuffer)
         kwargs['replay_buffer_kwargs'] = {'alpha': spec.priority_alpha,
                                           'beta': spec.priority_beta,
                                           'n_steps': spec.n_steps, 'gamma': gamma}
+    elif depth:
+        kwargs['replay_buffer_class'] = DepthReplayBuffer
+        kwargs['replay_buffer_kwargs'] = {'n_steps': spec.n_steps, 'gamma': gamma}
     else:
         kwargs['n_steps'] = spec.n_steps
     return kwargs
@@ -290,6 +339,8 @@ def learner_kwargs(spec: LearnerSpec, gamma: float) -> dict[str, Any]:
 
 def learner_policy(spec: LearnerSpec) -> str | type:
     """Return the policy ``DQN(...)`` builds: SB3's CnnPolicy, or the dueling one."""
+    if spec.aux_depth:
+        return DepthDuelingCnnPolicy if spec.dueling else DepthCnnPolicy
     return DuelingCnnPolicy if spec.dueling else 'CnnPolicy'
 
 

@@ -27,6 +27,7 @@ from nav_gym.training.learner import (
     max_q_target,
     random_shift,
 )
+from nav_sim.core.depth import DEPTH_SHAPE
 
 OBS = spaces.Box(0, 255, (3, 84, 84), np.uint8)
 ACTIONS = spaces.Discrete(3)
@@ -69,7 +70,7 @@ def test_every_component_has_a_flag_and_a_value_that_turns_it_off():
     for part in ('Double DQN', '3-step returns', 'dueling head', 'up to 4 px', 'prioritized'):
         assert part in full.describe()
     for name in ('n_steps', 'dueling', 'augment_shift', 'prioritized_replay', 'priority_alpha',
-                 'priority_beta'):
+                 'priority_beta', 'aux_depth'):
         assert name in {f.name for f in dataclasses.fields(TrainConfig)}
 
 
@@ -215,3 +216,96 @@ def test_a_checkpoint_of_the_learner_loads_with_dqn_load(tmp_path, spaces_only, 
     resumed = load_checkpoint(tmp_path / 'model.zip', spec, device='cpu')
     assert isinstance(resumed, Learner) and resumed.learner == spec
     assert model.policy.optimizer.defaults['fused'] is True
+
+
+# --- the auxiliary depth loss (issue 30): targets beside the observations, never in them --------
+def _depth_buffers():
+    from nav_gym.training.aux_depth import DepthFrameStackReplayBuffer, DepthReplayBuffer
+    from nav_gym.training.learner import DepthPrioritizedReplayBuffer
+    one = spaces.Box(-1e6, 1e6, (1,), np.float32)
+    return {
+        'n-step, 2 envs': (DepthReplayBuffer, one, 2, {}),
+        'prioritized': (DepthPrioritizedReplayBuffer, one, 1, {}),
+        'frame stack, 2 envs': (DepthFrameStackReplayBuffer,
+                                spaces.Box(-1e6, 1e6, (2,), np.float32), 2, {'frame_stack': 2}),
+    }
+
+
+@pytest.mark.parametrize('name', list(_depth_buffers()))
+def test_each_sampled_observation_gets_its_own_depth_and_a_first_frame_none(name):
+    import pickle
+    cls, space, n_envs, extra = _depth_buffers()[name]
+    buffer = cls(64, space, ACTIONS, device='cpu', n_envs=n_envs, n_steps=3, gamma=0.5,
+                 **extra)
+    expected = {}  # an observation's value: its depth (NaN: an episode's first frame)
+    first = [True] * n_envs
+    ends = {(0, 4), (1, 7), (0, 11)}
+    for t in range(30):
+        values = [1000.0 * e + t for e in range(n_envs)]
+        for e, v in enumerate(values):
+            expected[v] = np.nan if first[e] else v
+        dones = np.array([(e, t) in ends for e in range(n_envs)])
+        # the step's info holds the depth of the frame it led to (the next observation)
+        infos = [{'depth': np.full(DEPTH_SHAPE, v + 1.0, np.float32)} for v in values]
+        obs = np.array([[v - 1.0, v] if space.shape[0] == 2 else [v] for v in values],
+                       np.float32)
+        buffer.add(obs, obs + 1.0, np.ones((n_envs, 1)), np.zeros(n_envs), dones, infos)
+        first = list(dones)  # after an end, the next frame begins an episode
+    np.random.seed(3)
+    for _ in range(5):
+        samples = buffer.sample(32)
+        newest = samples.observations[:, -1].numpy()
+        got = buffer.last_depths
+        assert got.shape == (32, DEPTH_SHAPE[0] * DEPTH_SHAPE[1])
+        want = np.array([expected[v] for v in newest])
+        np.testing.assert_array_equal(got[:, 0], want)  # NaN where NaN, equal elsewhere
+        np.testing.assert_array_equal(got, np.repeat(got[:, :1], got.shape[1], axis=1))
+    assert np.isnan(list(expected.values())).sum() == 1 * n_envs + len(
+        [e for e in ends if e[0] < n_envs])
+    # a loaded buffer resumes a run: the frame after its newest begins an episode
+    assert not np.isnan(buffer.pending).all()
+    assert np.isnan(pickle.loads(pickle.dumps(buffer)).pending).all()
+
+
+def _depth_env(spaces_only):
+    class WithDepth(spaces_only):
+        def step(self, action):
+            obs, reward, terminated, truncated, info = super().step(action)
+            # a target the network can learn: the frame's mean brightness
+            info['depth'] = np.full(DEPTH_SHAPE, obs.mean() / 255.0 * 3.0, np.float32)
+            return obs, reward, terminated, truncated, info
+    return WithDepth
+
+
+@pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
+@pytest.mark.parametrize('dueling', [False, True])
+def test_the_depth_head_trains_and_never_changes_the_action(tmp_path, spaces_only, dueling):
+    import copy
+
+    from nav_gym.training.learner import q_and_features
+    spec = LearnerSpec(aux_depth=1.0, dueling=dueling)
+    assert 'auxiliary depth loss of weight 1' in spec.describe() and not spec.vanilla
+    model = learner_class(None, spec)(learner_policy(spec), _depth_env(spaces_only)(),
+                                      buffer_size=200, learning_starts=40, batch_size=8,
+                                      train_freq=4, seed=1, device='cpu',
+                                      **learner_kwargs(spec, 0.99))
+    head = copy.deepcopy(model.q_net.depth_head.state_dict())
+    model.learn(160)
+    assert model._n_updates > 0
+    assert 'train/depth_loss' in model.logger.name_to_value
+    trained = model.q_net.depth_head.state_dict()
+    assert not th.equal(trained['weight'], head['weight'])  # the loss reached the head
+    # the head is a training signal only: the Q-values, hence the actions, do not use it
+    obs = th.as_tensor(np.stack([OBS.sample() for _ in range(16)]))
+    without = copy.deepcopy(model.q_net)
+    del without.depth_head
+    with th.no_grad():
+        values = model.q_net(model.policy.obs_to_tensor(obs.numpy())[0])
+        assert th.equal(values, without(model.policy.obs_to_tensor(obs.numpy())[0]))
+        assert th.equal(values, q_and_features(model.q_net,
+                                               model.policy.obs_to_tensor(obs.numpy())[0])[0])
+    model.save(tmp_path / 'model.zip')
+    loaded = DQN.load(tmp_path / 'model.zip', device='cpu')  # the head comes back with it
+    assert th.equal(loaded.q_net.depth_head.weight, model.q_net.depth_head.weight)
+    assert (loaded.predict(obs.numpy(), deterministic=True)[0]
+            == model.predict(obs.numpy(), deterministic=True)[0]).all()
