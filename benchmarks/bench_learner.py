@@ -58,6 +58,7 @@ from nav_gym.policy.history import action_planes  # noqa: E402
 from nav_gym.training import config as train_config  # noqa: E402
 from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy  # noqa: E402
 from nav_gym.training.run_dir import SUMMARY  # noqa: E402
+from nav_sim.core.depth import DEPTH_KEY, DEPTH_RANGE, DEPTH_SHAPE  # noqa: E402
 
 #: where a gradient step's time goes: a name -> the calls whose cumulative time it is
 PHASES = {'sampling': ('buffers.py', 'sample'),
@@ -80,8 +81,9 @@ class SpacesOnly(gym.Env):
     action_space = gym.spaces.Discrete(3)
 
     def __init__(self) -> None:
-        """Draw images from a seeded generator; episodes last 100 steps."""
+        """Draw images (and depths, for ``aux_depth``) from seeded generators; episodes of 100."""
         self.rng, self.t = np.random.default_rng(0), 0
+        self.depth_rng = np.random.default_rng(1)
 
     def reset(self, *, seed: int | None = None, options: Any = None) -> tuple[np.ndarray, dict]:
         """Start an episode."""
@@ -92,8 +94,9 @@ class SpacesOnly(gym.Env):
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict]:
         """Return a random image; end the episode after 100 steps."""
         self.t += 1
+        depth = self.depth_rng.uniform(0.05, DEPTH_RANGE, DEPTH_SHAPE).astype(np.float32)
         return (self.rng.integers(0, 256, OBS_SHAPE, dtype=np.uint8), 0.0, False,
-                self.t >= 100, {})
+                self.t >= 100, {DEPTH_KEY: depth})
 
 
 def build(config: train_config.TrainConfig) -> Any:
@@ -166,6 +169,9 @@ class Floor:
         self.returns = rng.normal(size=FLOOR_BUFFER).astype(np.float32)
         self.discounts = np.full(FLOOR_BUFFER, config.gamma ** n, np.float32)
         self.dones = (rng.random(FLOOR_BUFFER) < 0.01).astype(np.float32)
+        # aux_depth: each observation's coarse depth, the head's target beside it
+        self.depths = rng.uniform(0.05, DEPTH_RANGE, (FLOOR_BUFFER, int(np.prod(DEPTH_SHAPE)))
+                                  ).astype(np.float32)
         self.rng = rng
 
     def step(self, batch: int, seconds: dict[str, float]) -> None:
@@ -191,8 +197,13 @@ class Floor:
             else:
                 next_q = next_target.max(dim=1, keepdim=True).values
             target = returns + (1.0 - dones) * discounts * next_q
-        current = self.online.q_net(self.online.features_extractor(obs)).gather(1, actions)
+        features = self.online.features_extractor(obs)
+        current = self.online.q_net(features).gather(1, actions)
         loss = torch.nn.functional.smooth_l1_loss(current, target)
+        if self.learner.aux_depth:
+            depths = torch.from_numpy(self.depths[index]) / DEPTH_RANGE
+            loss = loss + self.learner.aux_depth * torch.nn.functional.mse_loss(
+                self.online.depth_head(features), depths)
         t3 = clock()
         self.optimizer.zero_grad()
         loss.backward()
