@@ -43,7 +43,7 @@ DEVICE = re.compile(r'auto|cpu|cuda(:\d+)?')
 #: the components' flags (LearnerSpec fields), each with its value that turns the component off
 COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0,
               'prioritized_replay': False, 'frame_stack': 1, 'previous_action': False,
-              'aux_depth': 0.0}
+              'aux_depth': 0.0, 'munchausen': False}
 
 
 def vector_schedule(train_freq: int, gradient_steps: int, n_envs: int) -> tuple[int, int]:
@@ -102,6 +102,10 @@ class LearnerSpec:
                                "sampled observation (info['depth'], a 4 x 16 grid; Mirowski et "
                                'al. 2017, UNREAL), a training signal only: acting never uses '
                                'the head; 0: off', NON_NEGATIVE)
+    munchausen: bool = setting(False, 'Munchausen DQN (Vieillard et al. 2020): the target adds '
+                               "the scaled log-policy of the action taken (the target network's "
+                               'softmax, tau 0.03, alpha 0.9, clip -1), bootstraps from the soft '
+                               'value, and replaces Double DQN (set double_q: false)')
     priority_alpha: float = setting(0.6, 'prioritized replay: priority = (|TD error| + '
                                     'eps)^alpha', FRACTION)
     priority_beta: float = setting(0.4, 'prioritized replay: importance-weight exponent at the '
@@ -110,6 +114,8 @@ class LearnerSpec:
     def __post_init__(self) -> None:
         """Refuse values the learner cannot use (TrainConfigError): each field's bounds."""
         check_bounds(self, TrainConfigError)
+        if self.munchausen and self.double_q:
+            raise TrainConfigError('munchausen replaces Double DQN targets: set double_q: false')
         if self.memory and self.prioritized_replay:
             raise TrainConfigError('prioritized_replay and memory (frame_stack > 1, '
                                    'previous_action) do not combine yet: set one of them')
@@ -128,7 +134,8 @@ class LearnerSpec:
     def describe(self) -> str:
         """Name the learner as the report and Sweep.md write it."""
         parts = ['DQN (SB3) with Double DQN targets (van Hasselt et al. 2016)'
-                 if self.double_q else 'DQN (SB3)']
+                 if self.double_q else 'Munchausen DQN (Vieillard et al. 2020) on SB3'
+                 if self.munchausen else 'DQN (SB3)']
         if self.n_steps > 1:
             parts.append(f'{self.n_steps}-step returns')
         if self.dueling:
@@ -197,6 +204,7 @@ class TrainConfig:
     frame_stack: int = _learner('frame_stack')
     previous_action: bool = _learner('previous_action')
     aux_depth: float = _learner('aux_depth')
+    munchausen: bool = _learner('munchausen')
     priority_alpha: float = _learner('priority_alpha')
     priority_beta: float = _learner('priority_beta')
     checkpoint_freq: int = setting(10_000, 'steps between checkpoints (all are kept)',

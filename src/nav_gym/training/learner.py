@@ -16,6 +16,8 @@ own ``DQN`` untouched (the workshop's learner, bit for bit: config/workshop.yaml
   this many pixels with replicated edges (DrQ, Kostrikov et al. 2021; RAD, Laskin et al. 2020);
 - ``prioritized_replay``: proportional prioritized replay with importance weights (Schaul et
   al. 2016);
+- ``munchausen``: Munchausen DQN's target (Vieillard et al. 2020), the scaled log-policy of the
+  action taken added to the reward and a soft value bootstrapped, in place of Double DQN's;
 - ``frame_stack``: the agent's last k frames as its input, replayed from single frames
   (:mod:`nav_gym.training.memory`; DRQN's comparison, Hausknecht & Stone 2015);
 - ``aux_depth``: an auxiliary loss of this weight, a linear head on the online network's
@@ -57,27 +59,9 @@ from nav_gym.training.aux_depth import (
 )
 from nav_gym.training.config import LearnerSpec
 from nav_gym.training.memory import FrameStackReplayBuffer
+from nav_gym.training.targets import double_q_target, max_q_target, munchausen_target
 
 PRIORITY_EPS = 1e-6  # added to |TD error| so that no transition's priority is zero
-
-
-def double_q_target(rewards: th.Tensor, dones: th.Tensor, discounts: th.Tensor | float,
-                    next_q_online: th.Tensor, next_q_target: th.Tensor) -> th.Tensor:
-    """Return the Double DQN TD target, ``(batch, 1)``.
-
-    ``next_q_online`` picks the next action (argmax), ``next_q_target`` values it; a done
-    transition's target is its reward.
-    """
-    next_actions = next_q_online.argmax(dim=1, keepdim=True)
-    next_values = th.gather(next_q_target, dim=1, index=next_actions)
-    return rewards + (1 - dones) * discounts * next_values
-
-
-def max_q_target(rewards: th.Tensor, dones: th.Tensor, discounts: th.Tensor | float,
-                 next_q_target: th.Tensor) -> th.Tensor:
-    """Return DQN's TD target, ``(batch, 1)``: the target network's best next value."""
-    next_values = next_q_target.max(dim=1).values.reshape(-1, 1)
-    return rewards + (1 - dones) * discounts * next_values
 
 
 def random_shift(images: th.Tensor, pad: int, generator: th.Generator | None = None,
@@ -272,7 +256,11 @@ class Learner(DQN):
                 next_obs = random_shift(next_obs, spec.augment_shift)
             with th.no_grad():
                 next_q_target = self.q_net_target(next_obs)
-                if spec.double_q:
+                if spec.munchausen:
+                    target = munchausen_target(data.rewards, data.dones, discounts,
+                                               self.q_net_target(obs), data.actions,
+                                               next_q_target)
+                elif spec.double_q:
                     target = double_q_target(data.rewards, data.dones, discounts,
                                              self.q_net(next_obs), next_q_target)
                 else:

@@ -18,15 +18,14 @@ from nav_gym.training.learner import (
     Learner,
     PrioritizedReplayBuffer,
     SumTree,
-    double_q_target,
     dueling_q,
     learner_class,
     learner_kwargs,
     learner_policy,
     load_checkpoint,
-    max_q_target,
     random_shift,
 )
+from nav_gym.training.targets import double_q_target, max_q_target, munchausen_target
 from nav_sim.core.depth import DEPTH_SHAPE
 
 OBS = spaces.Box(0, 255, (3, 84, 84), np.uint8)
@@ -43,6 +42,34 @@ def test_the_online_network_picks_and_the_target_network_values():
     assert out.flatten().tolist() == pytest.approx([0.5 + 0.9 * 4.0, 1.0])
     assert max_q_target(rewards, dones, 0.9, target).flatten().tolist() == pytest.approx(
         [0.5 + 0.9 * 9.0, 1.0])
+
+
+def test_the_munchausen_target_adds_the_clipped_log_policy_and_a_soft_value():
+    q_obs = th.tensor([[1.0, 1.03, 0.5], [0.0, 0.0, 0.0]])
+    next_q = th.tensor([[2.0, 1.0, 1.97], [5.0, 5.0, 5.0]])
+    rewards, dones, actions = th.tensor([[0.5], [1.0]]), th.tensor([[0.0], [1.0]]), \
+        th.tensor([[0], [2]])
+    tau, alpha = 0.03, 0.9
+    out = munchausen_target(rewards, dones, 0.9, q_obs, actions, next_q, tau, alpha, -1.0)
+
+    def log_pi(q: list[float]) -> np.ndarray:
+        z = np.array(q) / tau
+        return z - z.max() - np.log(np.exp(z - z.max()).sum())
+    # row 0: the action taken (0) is 0.03 below the best: log pi(0) = log(1 / (1 + e)) - ...
+    bonus = alpha * tau * np.clip(log_pi([1.0, 1.03, 0.5])[0], -1.0, 0.0)
+    pi_next = np.exp(log_pi([2.0, 1.0, 1.97]))
+    soft = float((pi_next * (np.array([2.0, 1.0, 1.97]) - tau * log_pi([2.0, 1.0, 1.97]))).sum())
+    assert out[0, 0].item() == pytest.approx(0.5 + bonus + 0.9 * soft, rel=1e-5)
+    assert bonus < 0 and 1.97 < soft < 2.0 + tau * np.log(3)  # between the max and max + tau ln 3
+    # row 1: done; uniform Q, so log pi = -ln 3 = -1.10, clipped to -1: the bonus is -alpha tau
+    assert out[1, 0].item() == pytest.approx(1.0 - alpha * tau, rel=1e-5)
+    # alpha 0 and a tiny temperature: DQN's own target
+    assert th.allclose(munchausen_target(rewards, dones, 0.9, q_obs, actions, next_q, 1e-4, 0.0),
+                       max_q_target(rewards, dones, 0.9, next_q), atol=1e-3)
+    # a far worse action's log-policy is clipped at -1: the bonus is at least -alpha tau
+    far = munchausen_target(rewards, dones, 0.9, th.tensor([[0.0, 9.0, 9.0]] * 2), actions,
+                            next_q, tau, alpha, -1.0)
+    assert far[0, 0].item() == pytest.approx(out[0, 0].item() - bonus - alpha * tau, rel=1e-5)
 
 
 def test_double_dqn_with_3_step_returns_is_the_default_and_sb3_dqn_is_one_file_away():
@@ -70,12 +97,12 @@ def test_every_component_has_a_flag_and_a_value_that_turns_it_off():
     for part in ('Double DQN', '3-step returns', 'dueling head', 'up to 4 px', 'prioritized'):
         assert part in full.describe()
     for name in ('n_steps', 'dueling', 'augment_shift', 'prioritized_replay', 'priority_alpha',
-                 'priority_beta', 'aux_depth'):
+                 'priority_beta', 'aux_depth', 'munchausen'):
         assert name in {f.name for f in dataclasses.fields(TrainConfig)}
 
 
 @pytest.mark.parametrize('bad', [{'n_steps': 0}, {'augment_shift': -1}, {'priority_alpha': 1.5},
-                                 {'priority_beta': -0.1}])
+                                 {'priority_beta': -0.1}, {'munchausen': True}])
 def test_a_bad_learner_setting_is_a_clear_error(bad):
     from nav_gym.errors import TrainConfigError
     with pytest.raises(TrainConfigError, match=next(iter(bad))):
@@ -201,8 +228,9 @@ def test_priorities_follow_td_errors_and_weights_correct_the_sampling():
 # --- the learner trains, saves and loads --------------------------------------------------------
 @pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')  # SB3's own, on any n-step load
 @pytest.mark.parametrize('spec', [LearnerSpec(), LearnerSpec(augment_shift=4, n_steps=3),
-                                  LearnerSpec(dueling=True, prioritized_replay=True)],
-                         ids=['default', 'shift+nstep', 'dueling+per'])
+                                  LearnerSpec(dueling=True, prioritized_replay=True),
+                                  LearnerSpec(double_q=False, munchausen=True)],
+                         ids=['default', 'shift+nstep', 'dueling+per', 'munchausen'])
 def test_a_checkpoint_of_the_learner_loads_with_dqn_load(tmp_path, spaces_only, spec):
     model = learner_class(None, spec)(learner_policy(spec), spaces_only(), buffer_size=200,
                                       learning_starts=40, batch_size=8, train_freq=4, seed=1,
