@@ -27,7 +27,7 @@ from nav_gym.env.observation import OBS_SHAPE
 from nav_gym.errors import PolicyModelError, TrainConfigError
 from nav_gym.policy.config import PolicyConfig
 from nav_gym.policy.exported import META_FILE, OnnxActor, is_export, read_export
-from nav_gym.policy.history import NO_ACTION, FrameHistory
+from nav_gym.policy.history import EpisodeMemory
 from nav_gym.policy.servo import servo_act, servo_band
 from nav_gym.training.config import TrainConfig
 from nav_gym.training.run_dir import FINAL_MODEL, is_run_dir, load_config
@@ -99,10 +99,8 @@ class DQNActor:
         model.policy.set_training_mode(False)
         spec = getattr(model, 'learner', None)  # SB3's own DQN has none: no memory
         n_actions = int(model.action_space.n) if getattr(spec, 'previous_action', False) else 0
-        k = (model.observation_space.shape[0] - n_actions) // OBS_SHAPE[0]
-        self.history = FrameHistory(k, n_actions) if k > 1 or n_actions else None
-        self._begun = False
-        self._action = NO_ACTION
+        self.memory = EpisodeMemory.of(model.observation_space.shape[0], OBS_SHAPE[0],
+                                       n_actions)
 
     @staticmethod
     def load(path: Path, device: str) -> Any:
@@ -116,24 +114,26 @@ class DQNActor:
 
     def begin_episode(self, seed: int | None) -> None:
         """Start an episode: a frame history begins again at the next observation."""
-        self._begun = False
+        if self.memory is not None:
+            self.memory.begin_episode()
 
     def carried_out(self, action: int) -> None:
         """Note the action carried out instead of the greedy one: the memory's previous action."""
-        self._action = int(action)
+        if self.memory is not None:
+            self.memory.carried_out(action)
 
     def act(self, observation: np.ndarray) -> tuple[int, tuple[float, ...]]:
         """Return argmax Q (what ``predict(deterministic=True)`` returns) and the Q-values."""
         import torch
-        if self.history is not None:  # the episode's first observation begins the history
-            observation = (self.history.push(observation, self._action) if self._begun
-                           else self.history.begin(observation))
-            self._begun = True
+        if self.memory is not None:  # the episode's first observation begins the history
+            observation = self.memory.observe(observation)
         tensor, _ = self.model.policy.obs_to_tensor(observation)
         with torch.no_grad():
             q_values = self.model.q_net(tensor)[0].cpu().numpy()
-        self._action = int(np.argmax(q_values))
-        return self._action, tuple(round(float(q), 6) for q in q_values)
+        action = int(np.argmax(q_values))
+        if self.memory is not None:
+            self.memory.chose(action)
+        return action, tuple(round(float(q), 6) for q in q_values)
 
 
 class ServoActor:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -35,7 +36,8 @@ class Command:
     image_age_s: float                   # wall-clock seconds since that image arrived
     inference_s: float                   # observation + network; 0 for a repeated decision
     observation: np.ndarray | None
-    reason: str                          # 'decided', 'repeated', 'no image', 'stale', 'bad image'
+    reason: str                          # 'decided', 'repeated', 'no image', 'stale', 'bad image',
+    #                                      'new episode' (the newest image is from before it)
     frame_id: str = ''                   # the decided image's frame
 
     @property
@@ -72,16 +74,27 @@ class Controller:
         self._last_image: Any = None
         self.image_error = ''  # why the newest image could not be converted
         self._stopped_stale = False
+        self._before: Callable[[Any], bool] = lambda msg: False
         self.begin_episode(None)  # the node's first episode starts with it (seed unknown)
 
-    def begin_episode(self, seed: int | None) -> None:
-        """Start an episode: the actor's memory (a frame history) begins at the next image.
+    def begin_episode(self, seed: int | None,
+                      before: Callable[[Any], bool] | None = None) -> None:
+        """Start an episode: the actor's memory (a frame history) begins at its first image.
 
         The node calls it at the sim's reset event, at its ``policy/begin_episode`` service and
         here after a stale-image stop: what the robot saw before the gap is no history to act on.
+        ``before`` tells whether an image was taken before the episode (the node's reset event
+        compares stamps: the reset frame shares the event's, whichever topic arrives first); by
+        default the newest image now is the last one before it.  Until the episode's first
+        image comes, decisions are stops ('new episode'): an image of the episode before is
+        not acted on, and does not begin the memory.
         """
         self.actor.begin_episode(seed)
         self._last = self._last_image = None
+        if before is None:
+            newest = self._image
+            before = lambda msg: msg is newest  # noqa: E731 - the image newest now
+        self._before = before
 
     def on_image(self, msg: Any, received: float | None = None) -> None:
         """Keep ``msg`` (a sensor_msgs/Image) as the newest image, received now by default."""
@@ -104,6 +117,8 @@ class Controller:
                 self.begin_episode(None)
             return self._stop('stale', msg.header, age)
         self._stopped_stale = False
+        if self._before(msg):
+            return self._stop('new episode', msg.header, age)
         last = self._last
         if msg is self._last_image and last is not None:
             return dataclasses.replace(last, image_age_s=age, inference_s=0.0,

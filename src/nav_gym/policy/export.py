@@ -1,8 +1,10 @@
 """Export a trained policy for the robot: ``RUN/export/policy.onnx`` and ``policy.json``.
 
 The acting Q-network (SB3's ``q_net``, the dueling one too) goes out whole: the uint8
-observation in, its scaling (``x / 255``, as SB3's ``preprocess_obs``), the CNN and the head,
-the Q-values out.  What the files hold is :mod:`nav_gym.policy.exported` (no torch), which also
+observation in (a memory learner's stack of frames and action planes, which the exported
+actor builds as the checkpoint's does), its scaling (``x / 255``, as SB3's
+``preprocess_obs``), the CNN and the head, the Q-values out (an auxiliary depth head is not
+part of it).  What the files hold is :mod:`nav_gym.policy.exported` (no torch), which also
 reads them back.  Needs torch and the ``onnx`` package; the robot needs neither.
 """
 
@@ -15,7 +17,6 @@ import warnings
 from pathlib import Path
 from typing import Any
 
-from nav_gym.env.observation import OBS_SHAPE
 from nav_gym.errors import PolicyModelError, TrainConfigError
 from nav_gym.policy.actors import Acting, DQNActor, model_file, run_of
 from nav_gym.policy.exported import (
@@ -52,12 +53,9 @@ def export_policy(model: str | Path, out: str | Path | None = None) -> ExportSpe
     acting = Acting.of(config, source)
     target = Path(out).expanduser() if out else (run or checkpoint.parent) / EXPORT_DIR
     loaded = DQNActor.load(checkpoint, 'cpu')
-    if loaded.observation_space.shape != OBS_SHAPE:  # its history is not an ONNX input yet
-        raise PolicyModelError(f'{checkpoint} is a learner with memory (a frame stack or the '
-                               'previous action: observation '
-                               f'{loaded.observation_space.shape}): it has no export yet; run it '
-                               'with its checkpoint instead')
     network = _acting_network(loaded, checkpoint)
+    # the network's input: a frame, or a memory's stack (the actor keeps the history)
+    shape = [1, *loaded.observation_space.shape]
     # the run's learner (its config names it); a checkpoint outside a run: what it saved
     learner = config.learner() if run is not None else getattr(loaded, 'learner', None)
     meta = {
@@ -66,7 +64,7 @@ def export_policy(model: str | Path, out: str | Path | None = None) -> ExportSpe
         'control_period': acting.control_period,
         'camera_hfov_deg': acting.hfov_deg,
         'observation': OBSERVATION,
-        'input': {'name': INPUT_NAME, 'shape': [1, *OBSERVATION['shape']], 'dtype': 'uint8'},
+        'input': {'name': INPUT_NAME, 'shape': shape, 'dtype': 'uint8'},
         'output': {'name': OUTPUT_NAME, 'shape': [1, len(acting.twists)], 'dtype': 'float32'},
         'run': str(run.resolve()) if run is not None else None,
         'checkpoint': str(checkpoint.resolve()),
@@ -78,7 +76,7 @@ def export_policy(model: str | Path, out: str | Path | None = None) -> ExportSpe
     shutil.rmtree(staging, ignore_errors=True)
     staging.mkdir(parents=True)
     try:
-        _write_onnx(network, staging / ONNX_FILE)
+        _write_onnx(network, staging / ONNX_FILE, shape)
         write_text(staging / META_FILE, json.dumps(meta, indent=1) + '\n')
         spec = read_export(staging)  # what the node will check
         if target.exists():
@@ -96,16 +94,16 @@ def _acting_network(model: Any, checkpoint: Path) -> Any:
     if network is None:
         raise PolicyModelError(f'{checkpoint} is a {type(model).__name__}, not a DQN: only '
                                'the Q-network of a DQN learner exports')
-    if getattr(model.policy, 'recurrent', False):  # a memory learner's state: not yet carried
-        raise PolicyModelError(f'{checkpoint}: a learner with memory does not export yet (its '
+    if getattr(model.policy, 'recurrent', False):  # a recurrent state: not yet carried
+        raise PolicyModelError(f'{checkpoint}: a recurrent learner does not export yet (its '
                                'state would be an input and an output of the graph)')
     return network.eval()
 
 
-def _write_onnx(network: Any, path: Path) -> None:
-    """Trace ``network`` on a uint8 observation into an ONNX file at ``path``."""
+def _write_onnx(network: Any, path: Path, shape: list[int]) -> None:
+    """Trace ``network`` on a uint8 input of ``shape`` into an ONNX file at ``path``."""
     import torch
-    example = torch.zeros((1, *OBSERVATION['shape']), dtype=torch.uint8)
+    example = torch.zeros(shape, dtype=torch.uint8)
     with warnings.catch_warnings(), torch.no_grad():
         warnings.simplefilter('ignore')  # the TorchScript exporter's deprecation notice
         torch.onnx.export(network, (example,), str(path), input_names=[INPUT_NAME],

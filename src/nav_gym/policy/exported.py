@@ -5,6 +5,10 @@
 - ``policy.onnx``: the acting Q-network.  Input ``observation``, a (1, 3, 84, 84) uint8 image
   as the env returns it; output ``q_values``, (1, 3) float32.  The graph scales the image to
   [0, 1] itself, as SB3's ``CnnPolicy`` does, so the caller feeds the env's observation as is.
+  A learner with memory (``frame_stack`` k, ``previous_action``) takes its stack instead,
+  (1, 3 k [+ 3], 84, 84): the actor keeps the history between decisions with the rule the
+  checkpoint's actor uses (:class:`nav_gym.policy.history.EpisodeMemory`), fed frame by frame
+  and begun afresh at each ``begin_episode``.
 - ``policy.json``: what the policy node needs besides the network: each action's cmd_vel, the
   control period, the camera's field of view, the observation's settings, the run's settings
   (``config``: the world, for an evaluation or the demo) and where it came from (the run, the
@@ -26,6 +30,7 @@ import numpy as np
 from nav_gym.env.actions import ACTION_NAMES
 from nav_gym.env.observation import OBS_SHAPE
 from nav_gym.errors import PolicyModelError
+from nav_gym.policy.history import EpisodeMemory
 
 EXPORT_DIR = 'export'            # RUN/export
 ONNX_FILE = 'policy.onnx'
@@ -132,17 +137,35 @@ class OnnxActor:
                 f'{OUTPUT_NAME!r}; it takes {[(i.name, i.type) for i in inputs]} and gives '
                 f'{[o.name for o in outputs]}')
         self.spec = spec
+        # a learner with memory takes its last frames (and action): kept as the torch actor does
+        n_actions = len(spec.twists) if spec.meta['learner'].get('previous_action') else 0
+        try:
+            self.memory = EpisodeMemory.of(int(inputs[0].shape[1]), OBS_SHAPE[0], n_actions)
+        except (TypeError, ValueError) as exc:
+            raise PolicyModelError(f'{spec.onnx}: its input {inputs[0].shape} does not fit '
+                                   f'{META_FILE} ({exc})') from None
 
     def begin_episode(self, seed: int | None) -> None:
-        """Start an episode (the frozen network keeps no state)."""
-        return None
+        """Start an episode: a memory's history begins again at the next observation."""
+        if self.memory is not None:
+            self.memory.begin_episode()
+
+    def carried_out(self, action: int) -> None:
+        """Note the action carried out instead of the greedy one: the memory's previous action."""
+        if self.memory is not None:
+            self.memory.carried_out(action)
 
     def q_values(self, observation: np.ndarray) -> np.ndarray:
-        """Return the Q-values of one (3, 84, 84) uint8 observation."""
+        """Return the Q-values of the network's input (a frame, or a memory's stack)."""
         batch = np.ascontiguousarray(observation, dtype=np.uint8)[None]
         return self.session.run([OUTPUT_NAME], {INPUT_NAME: batch})[0][0]
 
     def act(self, observation: np.ndarray) -> tuple[int, tuple[float, ...]]:
-        """Return argmax Q and the Q-values, rounded as DQNActor rounds them."""
+        """Return argmax Q and the Q-values of one (3, 84, 84) frame, as DQNActor does."""
+        if self.memory is not None:
+            observation = self.memory.observe(observation)
         q_values = self.q_values(observation)
-        return int(np.argmax(q_values)), tuple(round(float(q), 6) for q in q_values)
+        action = int(np.argmax(q_values))
+        if self.memory is not None:
+            self.memory.chose(action)
+        return action, tuple(round(float(q), 6) for q in q_values)

@@ -10,8 +10,9 @@ plane of the action taken before the latest frame is 255, the others 0, and all 
 episode's first frame (no action was taken in it yet).  An image network reads them as one-hot
 inputs (``/ 255``), and a random shift leaves them as they are.
 
-Acting keeps the frames in :class:`FrameHistory` (begun at each episode start: the acting
-protocol's ``begin_episode``); the replay buffer stores single frames and rebuilds the same
+Acting keeps the frames in :class:`FrameHistory` through :class:`EpisodeMemory` (begun at each
+episode start: the acting protocol's ``begin_episode``), the same for the checkpoint's actor
+and the exported one; the replay buffer stores single frames and rebuilds the same
 stacks at sample time with :func:`history_positions` and :func:`action_planes`, so that its
 memory does not grow k-fold.
 """
@@ -75,6 +76,52 @@ class FrameHistory:
             frames.append(action_planes(np.array([self._action]), self.n_actions,
                                         frames[-1].shape[1:])[0])
         return stack(frames)
+
+
+class EpisodeMemory:
+    """An actor's memory between its decisions: every actor's one rule (torch's and ONNX's).
+
+    ``observe`` turns each camera frame into the network's input: the episode's first frame
+    begins the history (after :meth:`begin_episode`, the acting protocol's hook), every later
+    one is pushed with the action that led to it, the one the actor chose (:meth:`chose`)
+    unless another was carried out (:meth:`carried_out`, an exploring evaluation's).
+    """
+
+    def __init__(self, k: int, n_actions: int = 0) -> None:
+        """Keep ``k`` frames and, with ``n_actions`` > 0, the previous action's planes."""
+        self.history = FrameHistory(k, n_actions)
+        self._begun = False
+        self._action = NO_ACTION
+
+    @classmethod
+    def of(cls, channels: int, frame_channels: int, n_actions: int) -> EpisodeMemory | None:
+        """Return the memory of a network taking ``channels`` input channels, or None.
+
+        ``frame_channels``: one frame's (3); ``n_actions``: the action planes it takes (0 for
+        none).  A network of one frame and no planes keeps no memory.
+        """
+        k = (channels - n_actions) // frame_channels
+        if k < 1 or k * frame_channels + n_actions != channels:
+            raise ValueError(f'{channels} input channels are not k frames of {frame_channels} '
+                             f'and {n_actions} action planes')
+        return cls(k, n_actions) if k > 1 or n_actions else None
+
+    def begin_episode(self) -> None:
+        """Start an episode: the next frame begins the history."""
+        self._begun = False
+
+    def observe(self, frame: np.ndarray) -> np.ndarray:
+        """Return the network's input for the episode's latest ``frame``."""
+        stacked = (self.history.push(frame, self._action) if self._begun
+                   else self.history.begin(frame))
+        self._begun = True
+        return stacked
+
+    def chose(self, action: int) -> None:
+        """Note the action chosen for the latest frame: the next frame's previous action."""
+        self._action = int(action)
+
+    carried_out = chose  # an action carried out instead of the chosen one takes its place
 
 
 def history_positions(positions: np.ndarray, k: int, size: int,

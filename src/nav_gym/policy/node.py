@@ -130,7 +130,10 @@ class PolicyNode(Node):
         event = ros_msgs.parse_event(msg)
         if event is not None and event['event'] == ros_msgs.EVENT_RESET:
             seed = event.get('seed')
-            self.controller.begin_episode(seed if isinstance(seed, int) else None)
+            since = ros_msgs.stamp_to_ns(msg.header.stamp)  # the reset frame's stamp
+            self.controller.begin_episode(
+                seed if isinstance(seed, int) else None,
+                lambda image: ros_msgs.stamp_to_ns(image.header.stamp) < since)
 
     def _on_begin_episode(self, request: Any, response: Any) -> Any:
         """Begin an episode on request: a robot whose graph has no episode events."""
@@ -191,6 +194,8 @@ class PolicyNode(Node):
                     self._errors_logged.add(self.controller.image_error)
                     self.get_logger().error(f'{self.controller.image_error}: publishing zero '
                                             'velocity until a usable image arrives')
+            elif command.reason == 'new episode':  # until the episode's first image: no gap
+                pass
             elif command.reason != self._state and command.reason == 'no image':
                 self.get_logger().warn(
                     f'no image on {self.resolve_topic_name(interface.IMAGE_TOPIC)} yet: '

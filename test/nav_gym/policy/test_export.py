@@ -119,6 +119,42 @@ def test_every_learner_flag_exports(tmp_path, spaces_only, flags):
         assert np.allclose(q_torch, q_onnx, atol=1e-4)
 
 
+@pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
+@pytest.mark.parametrize('flags', [{'frame_stack': 3}, {'previous_action': True},
+                                   {'frame_stack': 2, 'previous_action': True}])
+def test_a_memory_learner_exports_and_acts_as_its_checkpoint_across_episodes(
+        tmp_path, spaces_only, flags):
+    run = make_tiny_run(tmp_path, spaces_only, steps=16, **flags)
+    spec = export_policy(run)
+    channels = 3 * flags.get('frame_stack', 1) + (3 if flags.get('previous_action') else 0)
+    assert spec.meta['input']['shape'] == [1, channels, 84, 84]
+    torch_actor, onnx_actor = DQNActor(run / 'final_model.zip'), OnnxActor(spec)
+    rng = np.random.default_rng(7)
+    frames = [rng.integers(0, 256, (3, 84, 84), dtype=np.uint8) for _ in range(4)]
+    firsts = []
+    for episode in range(3):
+        for actor in (torch_actor, onnx_actor):
+            actor.begin_episode(episode)
+        for t in range(5):
+            frame = frames[(episode + t) % len(frames)]
+            (a_torch, q_torch), (a_onnx, q_onnx) = torch_actor.act(frame), onnx_actor.act(frame)
+            assert np.allclose(q_torch, q_onnx, atol=1e-4), (episode, t)
+            if max(q_torch) - sorted(q_torch)[-2] > 1e-3:  # not a tie
+                assert a_torch == a_onnx
+            if t == 0:
+                firsts.append(q_onnx)
+            if t == 2:  # an exploring evaluation's random action: the memory's previous one
+                for actor in (torch_actor, onnx_actor):
+                    actor.carried_out((a_torch + 1) % 3)
+    # the memory is used: frame 1 after frame 0 is another input than frame 1 alone (episode
+    # 1's first), and a new episode begins afresh
+    onnx_actor.begin_episode(None)
+    onnx_actor.act(frames[0])
+    assert onnx_actor.act(frames[1])[1] != firsts[1]
+    onnx_actor.begin_episode(None)
+    assert onnx_actor.act(frames[1])[1] == firsts[1]
+
+
 def test_a_lockstep_evaluation_gives_the_same_outcomes(run, export):
     from nav_eval.evaluation.runner import run_episode
     from nav_gym.env.config import EnvConfig

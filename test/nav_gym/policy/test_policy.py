@@ -205,7 +205,32 @@ def test_a_stale_image_stop_and_an_explicit_start_begin_the_actors_memory():
     assert actor.episodes == [None, None]  # once per gap
     ctl.on_image(image(np.zeros((96, 128, 3), np.uint8)))
     assert ctl.decide().reason == 'decided'
-    ctl.begin_episode(7)  # the sim's reset event, or the node's policy/begin_episode service
+    ctl.begin_episode(7)  # the node's policy/begin_episode service
     assert actor.episodes == [None, None, 7]
-    assert ctl.decide().reason == 'decided'  # the same image, decided afresh in the episode
+    # the newest image is the episode before's: a stop until the episode's first image
+    assert ctl.decide().reason == 'new episode' and ctl.decide().stopped
+    assert len(actor.observations) == 2
+    ctl.on_image(image(np.zeros((96, 128, 3), np.uint8)))
+    assert ctl.decide().reason == 'decided'
     assert len(actor.observations) == 3
+
+
+def test_a_reset_event_begins_the_episode_at_its_frames_stamp_whichever_comes_first():
+    """The sim's reset event and its frame share a stamp but travel on two topics."""
+    actor = Counting()
+    ctl, _ = controller(actor)
+    old = image(np.zeros((96, 128, 3), np.uint8), stamp_s=4)
+    frame = image(np.ones((96, 128, 3), np.uint8), stamp_s=5)
+
+    def before_5s(msg) -> bool:  # noqa: ANN001 - what the node passes: stamp < the event's
+        return msg.header.stamp.sec < 5
+
+    ctl.on_image(old)
+    assert ctl.decide().reason == 'decided'
+    ctl.begin_episode(3, before_5s)  # the event first: the old image is not acted on
+    assert ctl.decide().reason == 'new episode' and len(actor.observations) == 1
+    ctl.on_image(frame)
+    assert ctl.decide().reason == 'decided' and len(actor.observations) == 2
+    ctl.begin_episode(4, before_5s)  # the frame first, then its event: decided afresh
+    assert ctl.decide().reason == 'decided' and len(actor.observations) == 3
+    assert actor.episodes == [None, 3, 4]

@@ -273,15 +273,22 @@ def test_a_dqn_run_decides_with_its_q_values_and_its_runs_actions(tmp_path, name
 
 
 @pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
+@pytest.mark.parametrize('source', ['checkpoint', 'onnx'])
 def test_a_memory_policy_begins_its_history_at_a_reset_event_the_service_and_a_stale_stop(
-        tmp_path, namespace, frames, spaces_only, graph):
+        tmp_path, namespace, frames, spaces_only, graph, source):
     """A 2-frame-stack model: the Q-values of image A tell whether A began the history.
 
     A fresh history stacks A with itself; after B without a new episode it stacks B and A,
-    whose Q-values differ (checked first: the probe can see a history that goes on).
+    whose Q-values differ (checked first: the probe can see a history that goes on).  The
+    same for its checkpoint and its ONNX export.
     """
     run = make_tiny_run(tmp_path, spaces_only, frame_stack=2)
-    process = start_policy('-r', f'__ns:={namespace}', '-p', f'model:={run}',
+    if source == 'onnx':
+        from nav_gym.policy.export import export_policy
+        model = export_policy(run).path
+    else:
+        model = run
+    process = start_policy('-r', f'__ns:={namespace}', '-p', f'model:={model}',
                            '-p', 'period:=0.05', '-p', 'image_timeout:=2.0')
     events = graph.node.create_publisher(DiagnosticArray, interface.EVENT_TOPIC,
                                          qos.OBSERVATION)
@@ -293,13 +300,14 @@ def test_a_memory_policy_begins_its_history_at_a_reset_event_the_service_and_a_s
         d = graph.decision(msg)
         return d['q_left'], d['q_forward'], d['q_right']
 
-    def decided(rgb: np.ndarray, wanted: tuple[float, ...] | None = None) -> tuple[float, ...]:
+    def decided(rgb: np.ndarray, wanted: tuple[float, ...] | None = None,
+                stamp: int | None = None) -> tuple[float, ...]:
         """Show ``rgb``; return the Q-values of the decision on it (``wanted``, once they are).
 
-        A reset event and the image after it travel on two topics: a decision the node made
-        before it took the event is made again after it, from the fresh history.
+        A reset event and its frame travel on two topics with one stamp: a decision the node
+        made on the frame before it took the event is made again after it, afresh.
         """
-        stamp = next(stamps) * 1_000_000_000
+        stamp = stamp if stamp is not None else next(stamps) * 1_000_000_000
         graph.publish(encoded(rgb, 'rgb8', stamp))
 
         def found() -> tuple[float, ...] | None:
@@ -321,10 +329,11 @@ def test_a_memory_policy_begins_its_history_at_a_reset_event_the_service_and_a_s
         going_on = decided(image_a)  # no new episode: B and A
         assert going_on != fresh, 'the probe cannot tell a history that goes on'
         assert decided(image_b) == after_b  # B last: A without a new episode is B and A
-        # 1. the sim's reset event
+        # 1. the sim's reset event, stamped as its frame (the image before it is not acted on)
+        reset = next(stamps) * 1_000_000_000
         events.publish(ros_msgs.event_msg(ros_msgs.EVENT_RESET, {'seed': 5, 'episode': 2},
-                                          ros_msgs.stamp_from_ns(0)))
-        assert decided(image_a, fresh) == fresh
+                                          ros_msgs.stamp_from_ns(reset)))
+        assert decided(image_a, fresh, stamp=reset) == fresh
         assert decided(image_b) == after_b  # and the history goes on within the episode
         # 2. the explicit reset: the policy/begin_episode service
         future = begin.call_async(Trigger.Request())

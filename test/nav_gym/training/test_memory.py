@@ -169,7 +169,6 @@ def two_episodes(spec, envs, tmp_path):  # noqa: ANN001, ANN201
 def test_an_actor_of_a_frame_stack_learner_keeps_and_begins_its_history(spaces_only, tmp_path):
     import torch
 
-    from nav_gym.errors import PolicyModelError
     from nav_gym.policy.export import export_policy
     from nav_gym.training.config import LearnerSpec
 
@@ -179,8 +178,9 @@ def test_an_actor_of_a_frame_stack_learner_keeps_and_begins_its_history(spaces_o
     firsts = [[int(t[0, c, 0, 0]) for c in (0, 3)] for t, _ in decisions]  # the raw stacks
     assert firsts == [[10, 10], [10, 20], [30, 30]]
     assert all(t.shape == torch.Size([1, 6, 84, 84]) for t, _ in decisions)
-    with pytest.raises(PolicyModelError, match='learner with memory'):
-        export_policy(tmp_path / 'model.zip', tmp_path / 'export')
+    # it exports (its stack is the network's input, tests/nav_gym/policy/test_export.py)
+    assert export_policy(tmp_path / 'model.zip', tmp_path / 'export').meta['input'][
+        'shape'] == [1, 6, 84, 84]
 
 
 @pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
