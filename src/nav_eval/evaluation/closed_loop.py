@@ -192,7 +192,9 @@ def _command(graph: RealtimeGraph, period: Period, first: Period, loop: LoopSett
     checks['races'] += races
     checks['twist_mismatches'] += mismatches
     checks['stopped_periods'] += decision is None or decision.action < 0
-    stamp = None if decision is None else decision.image_stamp_ns
+    # a command decided on an image of the episode before (a stop, such as the policy's 'new
+    # episode' one while it waits for the episode's first image, drives nothing)
+    stamp = None if decision is None or decision.action < 0 else decision.image_stamp_ns
     checks['previous_episode_commands'] += stamp is not None and stamp < first.tick.stamp_ns
     return decision
 

@@ -200,6 +200,9 @@ def start_ray(address: str | None) -> bool:
     # machine shared with anything else the trials then get a fraction of their CPUs
     os.environ.setdefault('RAY_worker_niceness', '0')
     os.environ.setdefault('RAY_AIR_NEW_OUTPUT', '0')  # verbose=0 then prints nothing
+    # one trial staged at a time, the scheduler's (StartedFirst) choice: Tune would otherwise
+    # stage every pending trial at once and start them in its restore order
+    os.environ.setdefault('TUNE_MAX_PENDING_TRIALS_PG', '1')
     for name in ('ray.tune', 'ray.train', 'ray.air'):  # our progress lines say it all
         logging.getLogger(name).setLevel(logging.CRITICAL)
     if ray.is_initialized():

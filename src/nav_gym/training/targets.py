@@ -44,14 +44,15 @@ def munchausen_target(rewards: th.Tensor, dones: th.Tensor, discounts: th.Tensor
     """Return the Munchausen DQN target, ``(batch, 1)`` (Vieillard et al. 2020, eq. 2).
 
     ``q_target`` and ``next_q_target``: the target network's values of the observation and of
-    the next one; ``pi = softmax(q / tau)``.  The target is the reward, plus ``alpha tau``
-    times the log-policy of the action taken clipped to ``[clip, 0]``, plus the discounted soft
+    the next one; ``pi = softmax(q / tau)``.  The target is the reward, plus ``alpha`` times
+    ``tau log pi`` of the action taken clipped to ``[clip, 0]`` (as the paper's and its
+    reference code's ``l0``), plus the discounted soft
     value ``sum_a' pi(a') (q(a') - tau log pi(a'))`` of the next observation (none when done).
     With n-step returns the reward is SB3's n-step return and the bonus is the first action's:
     the bonuses and entropies of the steps between are left out.
     """
     log_pi = F.log_softmax(q_target / tau, dim=1)
-    bonus = alpha * tau * th.gather(log_pi, 1, actions.long()).clamp(clip, 0.0)
+    bonus = alpha * (tau * th.gather(log_pi, 1, actions.long())).clamp(clip, 0.0)
     next_log_pi = F.log_softmax(next_q_target / tau, dim=1)
     soft_value = (next_log_pi.exp() * (next_q_target - tau * next_log_pi)).sum(1, keepdim=True)
     return rewards + bonus + (1 - dones) * discounts * soft_value

@@ -45,31 +45,29 @@ def test_the_online_network_picks_and_the_target_network_values():
 
 
 def test_the_munchausen_target_adds_the_clipped_log_policy_and_a_soft_value():
-    q_obs = th.tensor([[1.0, 1.03, 0.5], [0.0, 0.0, 0.0]])
-    next_q = th.tensor([[2.0, 1.0, 1.97], [5.0, 5.0, 5.0]])
-    rewards, dones, actions = th.tensor([[0.5], [1.0]]), th.tensor([[0.0], [1.0]]), \
-        th.tensor([[0], [2]])
     tau, alpha = 0.03, 0.9
-    out = munchausen_target(rewards, dones, 0.9, q_obs, actions, next_q, tau, alpha, -1.0)
 
-    def log_pi(q: list[float]) -> np.ndarray:
+    def tau_log_pi(q: list[float]) -> np.ndarray:  # tau log softmax(q / tau), by hand
         z = np.array(q) / tau
-        return z - z.max() - np.log(np.exp(z - z.max()).sum())
-    # row 0: the action taken (0) is 0.03 below the best: log pi(0) = log(1 / (1 + e)) - ...
-    bonus = alpha * tau * np.clip(log_pi([1.0, 1.03, 0.5])[0], -1.0, 0.0)
-    pi_next = np.exp(log_pi([2.0, 1.0, 1.97]))
-    soft = float((pi_next * (np.array([2.0, 1.0, 1.97]) - tau * log_pi([2.0, 1.0, 1.97]))).sum())
+        return tau * (z - z.max() - np.log(np.exp(z - z.max()).sum()))
+
+    # row 0: the action taken (1) is 0.1 below the best: tau log pi = -0.1 (and a little),
+    # inside the clip; row 1: action 2 is 2 below the best: tau log pi = -2, clipped to -1
+    q_obs = th.tensor([[1.0, 0.9, 0.5], [3.0, 3.0, 1.0]])
+    next_q = th.tensor([[2.0, 1.0, 1.97], [5.0, 5.0, 5.0]])
+    rewards, dones = th.tensor([[0.5], [1.0]]), th.tensor([[0.0], [1.0]])
+    actions = th.tensor([[1], [2]])
+    out = munchausen_target(rewards, dones, 0.9, q_obs, actions, next_q, tau, alpha, -1.0)
+    bonus = alpha * np.clip(tau_log_pi([1.0, 0.9, 0.5])[1], -1.0, 0.0)
+    assert -0.1 * alpha > bonus > -0.11 * alpha  # how much worse the action is, not a constant
+    pi_next = np.exp(tau_log_pi([2.0, 1.0, 1.97]) / tau)
+    soft = float((pi_next * (np.array([2.0, 1.0, 1.97]) - tau_log_pi([2.0, 1.0, 1.97]))).sum())
     assert out[0, 0].item() == pytest.approx(0.5 + bonus + 0.9 * soft, rel=1e-5)
-    assert bonus < 0 and 1.97 < soft < 2.0 + tau * np.log(3)  # between the max and max + tau ln 3
-    # row 1: done; uniform Q, so log pi = -ln 3 = -1.10, clipped to -1: the bonus is -alpha tau
-    assert out[1, 0].item() == pytest.approx(1.0 - alpha * tau, rel=1e-5)
+    assert 1.97 < soft < 2.0 + tau * np.log(3)  # between the max and max + tau ln 3
+    assert out[1, 0].item() == pytest.approx(1.0 - alpha * 1.0, rel=1e-5)  # done, clipped
     # alpha 0 and a tiny temperature: DQN's own target
     assert th.allclose(munchausen_target(rewards, dones, 0.9, q_obs, actions, next_q, 1e-4, 0.0),
                        max_q_target(rewards, dones, 0.9, next_q), atol=1e-3)
-    # a far worse action's log-policy is clipped at -1: the bonus is at least -alpha tau
-    far = munchausen_target(rewards, dones, 0.9, th.tensor([[0.0, 9.0, 9.0]] * 2), actions,
-                            next_q, tau, alpha, -1.0)
-    assert far[0, 0].item() == pytest.approx(out[0, 0].item() - bonus - alpha * tau, rel=1e-5)
 
 
 def test_double_dqn_with_3_step_returns_is_the_default_and_sb3_dqn_is_one_file_away():
