@@ -125,8 +125,13 @@ class Claim:
         """Tell whether this client holds (or shares) the sim."""
         return self.mine is not None
 
-    def acquire(self, spin: Callable[[float], None], where: str, timeout: float) -> None:
-        """Claim the sim, or raise SimInUseError naming the process that holds it."""
+    def acquire(self, spin: Callable[[float], None], where: str, timeout: float,
+                abort: Callable[[], str | None] | None = None) -> None:
+        """Claim the sim, or raise SimInUseError naming the process that holds it.
+
+        ``abort`` is polled while waiting for the answer: a message from it (the sim process
+        this client started has died) ends the wait at once, with that message.
+        """
         if self.mine is not None:
             return
         mine = {'node': self.node.get_fully_qualified_name(), 'host': socket.gethostname(),
@@ -135,6 +140,11 @@ class Claim:
         self._publisher.publish(String(data=json.dumps(mine)))
         deadline = time.monotonic() + timeout
         while not self._decided(mine):
+            reason = abort() if abort is not None else None
+            if reason:
+                self._withdraw()
+                raise SimUnavailableError(f'nav_sim in {where} stopped before it answered '
+                                          f'its claim: {reason}')
             if time.monotonic() >= deadline:
                 self._withdraw()
                 raise SimUnavailableError(

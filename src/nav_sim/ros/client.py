@@ -286,7 +286,7 @@ class SimClient:
             self._executor.spin_once(timeout_sec=0.05)
         self.check_single_sim(by_name=True)
         self.claim.acquire(lambda t: self._executor.spin_once(timeout_sec=t), self.where,
-                           limit)
+                           limit, abort)
 
     def set_parameters(self, **values: Any) -> None:
         """Set sim_node parameters (e.g. seed, split); raises ScenarioError if refused."""

@@ -162,3 +162,30 @@ def test_every_reset_of_a_burst_is_answered(namespace):
         finally:
             node.destroy_node()
             context.try_shutdown()
+
+
+def test_a_sim_that_dies_before_it_answers_the_claim_is_named_at_once(namespace):
+    """No sim answers in this namespace: only ``abort`` (a dead sim process) ends the wait."""
+    import pytest
+
+    from nav_sim.errors import SimUnavailableError
+    client = SimClient(namespace, timeout=5.0)
+    try:
+        start = time.monotonic()  # the probe: without abort, the claim waits for its time-out
+        with pytest.raises(SimUnavailableError, match='did not answer its claim within 0.5 s'):
+            client.claim.acquire(lambda t: client.spin_once(t), client.where, 0.5)
+        assert time.monotonic() - start >= 0.5
+        polls = []
+
+        def abort() -> str | None:
+            polls.append(1)
+            return 'sim_node (pid 1) was killed by signal SIGKILL (9)' if len(polls) > 2 else None
+        start = time.monotonic()
+        with pytest.raises(SimUnavailableError) as raised:
+            client.claim.acquire(lambda t: client.spin_once(t), client.where, 60.0, abort)
+        assert str(raised.value) == (f'nav_sim in {client.where} stopped before it answered '
+                                     'its claim: sim_node (pid 1) was killed by signal SIGKILL '
+                                     '(9)')
+        assert time.monotonic() - start < 5.0 and not client.claim.held
+    finally:
+        client.close()
