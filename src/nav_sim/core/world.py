@@ -50,10 +50,12 @@ class World:
         self.geometry = read_arena(self.model)
         self._plain_look = self._look_state()
         self._renderer: mujoco.Renderer | None = None
-        self._depth_rays = cell_rays(config.camera_hfov_deg, config.camera_width,
-                                     config.camera_height)
-        self._ray_geoms = np.zeros(len(self._depth_rays), np.int32)
-        self._ray_distances = np.zeros(len(self._depth_rays))
+        rays = cell_rays(config.camera_hfov_deg, config.camera_width, config.camera_height)
+        # a rotation keeps lengths: the unit rays and their lengths are computed once
+        self._ray_lengths = np.linalg.norm(rays, axis=1)
+        self._unit_rays = rays / self._ray_lengths[:, None]
+        self._ray_geoms = np.zeros(len(rays), np.int32)
+        self._ray_distances = np.zeros(len(rays))
 
     def _configure_model(self) -> None:
         m, cfg = self.model, self.config
@@ -215,9 +217,9 @@ class World:
         over every geom, as the camera renders them), on the poses of the last forward pass.
         """
         m, d, cam = self.model, self.data, self.camera_id
-        rays = self._depth_rays @ d.cam_xmat[cam].reshape(3, 3).T  # camera to world frame
-        lengths = np.linalg.norm(rays, axis=1)
-        mujoco.mj_multiRay(m, d, d.cam_xpos[cam].copy(), (rays / lengths[:, None]).ravel(),
+        rays = self._unit_rays @ d.cam_xmat[cam].reshape(3, 3).T  # camera to world frame
+        lengths = self._ray_lengths
+        mujoco.mj_multiRay(m, d, d.cam_xpos[cam].copy(), rays.ravel(),
                            None, 1, -1, self._ray_geoms, self._ray_distances,
                            None, len(rays), DEPTH_RANGE * float(lengths.max()))
         depth = np.where(self._ray_geoms >= 0, self._ray_distances / lengths, DEPTH_RANGE)
