@@ -58,12 +58,14 @@ from nav_gym.policy.history import action_planes  # noqa: E402
 from nav_gym.training import config as train_config  # noqa: E402
 from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy  # noqa: E402
 from nav_gym.training.run_dir import SUMMARY  # noqa: E402
+from nav_gym.training.spec import COMPONENTS, LearnerSpec  # noqa: E402
 from nav_sim.core.depth import DEPTH_KEY, DEPTH_RANGE, DEPTH_SHAPE  # noqa: E402
 
 #: where a gradient step's time goes: a name -> the calls whose cumulative time it is
 PHASES = {'sampling': ('buffers.py', 'sample'),
           'uint8 -> float': ('preprocessing.py', 'preprocess_obs'),
-          'augmentation': ('learner.py', 'random_shift'),
+          'random shifts': ('augment.py', 'random_shift'),
+          'colour jitter': ('augment.py', 'random_colour'),
           'forward passes': ('module.py', '_call_impl'),
           'backward pass': ('_tensor.py', 'backward'),
           'gradient clipping': ('clip_grad.py', 'clip_grad_norm_'),
@@ -318,10 +320,10 @@ def main() -> None:
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
-    learner_keys = {f.name for f in dataclasses.fields(train_config.LearnerSpec)}
+    learner_keys = {f.name for f in dataclasses.fields(LearnerSpec)}
     common = [s for s in args.set if s.split('=')[0] not in learner_keys]  # both learners'
     vanilla = ['double_q=false', *(f'{k}={str(v).lower()}' for k, v in
-                                   train_config.COMPONENTS.items())]
+                                   COMPONENTS.items())]
     flags = {'vanilla DQN (SB3)': [*common, *vanilla], 'chosen': args.set}
     configs = {name: train_config.build(None, dict(s.split('=', 1) for s in settings))
                for name, settings in flags.items()}

@@ -6,6 +6,7 @@ New code imports the new module.
 
 from __future__ import annotations
 
-from nav_gym.training.config import LearnerSpec, TrainConfig
+from nav_gym.training.config import TrainConfig
+from nav_gym.training.spec import LearnerSpec
 
 __all__ = ['LearnerSpec', 'TrainConfig']

@@ -201,7 +201,7 @@ def test_a_run_saves_its_whole_env_config(tmp_path):
 def test_the_workshop_config_is_sb3_dqn_exactly_and_sets_only_the_learner():
     import yaml
 
-    from nav_gym.training.config import COMPONENTS
+    from nav_gym.training.spec import COMPONENTS
     path = REPO / 'config' / 'workshop.yaml'
     config = build(str(path), {})
     assert config.learner().vanilla and not TrainConfig().learner().vanilla

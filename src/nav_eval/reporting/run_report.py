@@ -35,7 +35,6 @@ from nav_eval.reporting.format import (
 from nav_eval.reporting.run_figures import MALFORMED, Figures, draw_figures
 from nav_eval.reporting.run_inputs import Run, dqn_sets_for_examples, final_set, load_run
 from nav_eval.reporting.videos import Clips, write_run_videos
-from nav_gym.training.config import learner_of
 from nav_gym.training.run_dir import (
     DIAGNOSIS_TEXT,
     EVAL,
@@ -46,15 +45,16 @@ from nav_gym.training.run_dir import (
     parse_checkpoint_name,
     run_settings,
 )
+from nav_gym.training.spec import learner_of
 from nav_sim.core.config import HELDOUT, TRAIN
 
 SECTIONS = ('1. Observation and action checks', '2. Training',
             '3. Early vs final checkpoint comparison', '4. Evaluation',
             '5. Representative trajectories', '6. Failure diagnosis',
             '7. Attempts and targeted improvements', '8. Reproduce')
-HYPERPARAMETERS = ('double_q', 'n_steps', 'dueling', 'augment_shift', 'prioritized_replay',
-                   'frame_stack', 'previous_action', 'aux_depth', 'munchausen',
-                   'priority_alpha', 'priority_beta',
+HYPERPARAMETERS = ('double_q', 'n_steps', 'dueling', 'augment_shift', 'augment_colour',
+                   'prioritized_replay', 'frame_stack', 'previous_action', 'aux_depth',
+                   'munchausen', 'priority_alpha', 'priority_beta',
                    'learning_rate', 'buffer_size', 'learning_starts', 'batch_size', 'gamma',
                    'train_freq', 'gradient_steps', 'target_update_interval',
                    'exploration_fraction', 'exploration_initial_eps', 'exploration_final_eps',

@@ -28,7 +28,7 @@ from nav_eval.sweeps.spec import (
     SWEEP_RESULTS,
 )
 from nav_eval.sweeps.statistics import RATES, summarise
-from nav_gym.training.config import learner_of
+from nav_gym.training.spec import learner_of
 from nav_sim.core.config import HELDOUT, TRAIN
 
 FIGURES = (('intervals', 'Interval estimates per configuration: success'),

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from nav_gym.errors import CheckpointError
-from nav_gym.training.config import LearnerSpec, TrainConfig
+from nav_gym.training.config import TrainConfig
 from nav_gym.training.files import atomic_write, write_text
 from nav_gym.training.run_dir import (
     CHECKPOINTS,
@@ -18,6 +18,7 @@ from nav_gym.training.run_dir import (
     checkpoint_path,
     checkpoints,
 )
+from nav_gym.training.spec import LearnerSpec
 
 
 def buffer_nbytes(buffer: Any) -> int:

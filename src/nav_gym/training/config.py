@@ -1,8 +1,9 @@
 """Training configuration: the learner, the workshop's DQN settings and the run's whole EnvConfig.
 
 Overridable from YAML and the command line; the effective configuration is saved with each run.
-Light imports only (no torch): :class:`LearnerSpec` names the learner,
-:mod:`nav_gym.training.learner` builds it.
+Light imports only (no torch): :mod:`nav_gym.training.spec` names the learner,
+:mod:`nav_gym.training.learner` builds it.  Checkpoints saved before the spec had its own module
+pickle it as ``nav_gym.training.config.LearnerSpec``, which this module imports.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ import yaml
 
 from nav_gym.env.config import EnvConfig, parse_mapping
 from nav_gym.errors import TrainConfigError
+from nav_gym.training.spec import LEARNER_FIELDS, LearnerSpec, learner_of
 from nav_sim.core.config import (
     AT_LEAST_ONE,
     FRACTION,
@@ -40,10 +42,6 @@ MAX_ENVS = 64
 _ENV_FIELDS = {f.name: f for f in dataclasses.fields(EnvConfig)}
 #: the torch devices a run may name
 DEVICE = re.compile(r'auto|cpu|cuda(:\d+)?')
-#: the components' flags (LearnerSpec fields), each with its value that turns the component off
-COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0,
-              'prioritized_replay': False, 'frame_stack': 1, 'previous_action': False,
-              'aux_depth': 0.0, 'munchausen': False}
 
 
 def vector_schedule(train_freq: int, gradient_steps: int, n_envs: int) -> tuple[int, int]:
@@ -66,108 +64,10 @@ def _env(name: str) -> Any:
                              metadata=_ENV_FIELDS[name].metadata)
 
 
-@dataclass(frozen=True)
-class LearnerSpec:
-    """Which learner a run trains: the TD target and the components (TrainConfig's fields).
-
-    Each component has a published basis and is off at its value in :data:`COMPONENTS`.  The
-    default learner is SB3's DQN with Double DQN targets and 3-step returns (adopted in
-    docs/experiments.md); every component off is SB3's DQN with Double DQN targets, and
-    ``double_q: false`` with every component off is SB3's DQN untouched, the workshop's learner
-    (config/workshop.yaml).  :mod:`nav_gym.training.learner` builds it.
-    """
-
-    double_q: bool = setting(True, 'Double DQN targets (van Hasselt et al. 2016): the online '
-                             "network picks the next action, the target network values it; false: "
-                             "SB3's DQN target (with n_steps 1 and every other component off, "
-                             "the workshop's learner, SB3's DQN exactly: config/workshop.yaml)")
-    n_steps: int = setting(3, "n-step returns (SB3's NStepReplayBuffer; Sutton 1988, Rainbow); "
-                           '1: one-step targets', AT_LEAST_ONE)
-    dueling: bool = setting(False, 'a dueling head, Q = V + A - mean(A) (Wang et al. 2016)')
-    augment_shift: int = setting(0, 'shift every sampled observation at random by up to this '
-                                 'many pixels, edges replicated (DrQ, Kostrikov et al. 2021; '
-                                 'RAD); 0: off', NON_NEGATIVE)
-    prioritized_replay: bool = setting(False, 'proportional prioritized replay with importance '
-                                       'weights (Schaul et al. 2016)')
-    frame_stack: int = setting(1, "the agent's memory: its last k camera frames stacked, the "
-                               "episode's first frame standing in before its start, rebuilt "
-                               'from a replay buffer of single frames (DRQN, Hausknecht & Stone '
-                               '2015, compare a recurrence with a stack of the same length); '
-                               '1: the frame alone', Bounds(1, 16))
-    previous_action: bool = setting(False, "the agent's memory of what it did: the action that "
-                                    'led to the latest frame as one-hot input planes after the '
-                                    'frames, none at an episode start (Mirowski et al. 2017)')
-    aux_depth: float = setting(0.0, 'weight of an auxiliary loss: a linear head on the online '
-                               "network's features predicts the camera's coarse depth of each "
-                               "sampled observation (info['depth'], a 4 x 16 grid; Mirowski et "
-                               'al. 2017, UNREAL), a training signal only: acting never uses '
-                               'the head; 0: off', NON_NEGATIVE)
-    munchausen: bool = setting(False, 'Munchausen DQN (Vieillard et al. 2020): the target adds '
-                               "the scaled log-policy of the action taken (the target network's "
-                               'softmax, tau 0.03, alpha 0.9, clip -1), bootstraps from the soft '
-                               'value, and replaces Double DQN (set double_q: false)')
-    priority_alpha: float = setting(0.6, 'prioritized replay: priority = (|TD error| + '
-                                    'eps)^alpha', FRACTION)
-    priority_beta: float = setting(0.4, 'prioritized replay: importance-weight exponent at the '
-                                   'start, annealed linearly to 1', FRACTION)
-
-    def __post_init__(self) -> None:
-        """Refuse values the learner cannot use (TrainConfigError): each field's bounds."""
-        check_bounds(self, TrainConfigError)
-        if self.munchausen and self.double_q:
-            raise TrainConfigError('munchausen replaces Double DQN targets: set double_q: false')
-        if self.memory and self.prioritized_replay:
-            raise TrainConfigError('prioritized_replay and memory (frame_stack > 1, '
-                                   'previous_action) do not combine yet: set one of them')
-
-    @property
-    def memory(self) -> bool:
-        """Tell whether the agent keeps a history (a frame stack or the previous action)."""
-        return self.frame_stack > 1 or self.previous_action
-
-    @property
-    def vanilla(self) -> bool:
-        """Tell whether this is SB3's DQN untouched (no Double DQN target, no component)."""
-        return not self.double_q and all(
-            getattr(self, name) == off for name, off in COMPONENTS.items())
-
-    def describe(self) -> str:
-        """Name the learner as the report and Sweep.md write it."""
-        parts = ['DQN (SB3) with Double DQN targets (van Hasselt et al. 2016)'
-                 if self.double_q else 'Munchausen DQN (Vieillard et al. 2020) on SB3'
-                 if self.munchausen else 'DQN (SB3)']
-        if self.n_steps > 1:
-            parts.append(f'{self.n_steps}-step returns')
-        if self.dueling:
-            parts.append('a dueling head (Wang et al. 2016)')
-        if self.augment_shift:
-            parts.append(f'random shifts of up to {self.augment_shift} px (DrQ, Kostrikov et al. '
-                         '2021)')
-        if self.frame_stack > 1:
-            parts.append(f'a {self.frame_stack}-frame stack (Hausknecht & Stone 2015)')
-        if self.previous_action:
-            parts.append('the previous action as input (Mirowski et al. 2017)')
-        if self.aux_depth:
-            parts.append(f'an auxiliary depth loss of weight {self.aux_depth:g} (Mirowski et al. '
-                         '2017)')
-        if self.prioritized_replay:
-            parts.append(f'prioritized replay (Schaul et al. 2016, alpha {self.priority_alpha}, '
-                         f'beta {self.priority_beta} to 1)')
-        return ', '.join(parts)
-
-
-_LEARNER_FIELDS = {f.name: f for f in dataclasses.fields(LearnerSpec)}
-
-
-def learner_of(settings: dict[str, Any]) -> LearnerSpec:
-    """Return the learner a mapping of training settings names (its other keys ignored)."""
-    return LearnerSpec(**{k: v for k, v in settings.items() if k in _LEARNER_FIELDS})
-
-
 def _learner(name: str) -> Any:
     """Declare a field as the LearnerSpec field ``name`` declares it (default, help, bounds)."""
-    return dataclasses.field(default=_LEARNER_FIELDS[name].default,
-                             metadata=_LEARNER_FIELDS[name].metadata)
+    return dataclasses.field(default=LEARNER_FIELDS[name].default,
+                             metadata=LEARNER_FIELDS[name].metadata)
 
 
 @dataclass(frozen=True)
@@ -200,6 +100,7 @@ class TrainConfig:
     n_steps: int = _learner('n_steps')
     dueling: bool = _learner('dueling')
     augment_shift: int = _learner('augment_shift')
+    augment_colour: float = _learner('augment_colour')
     prioritized_replay: bool = _learner('prioritized_replay')
     frame_stack: int = _learner('frame_stack')
     previous_action: bool = _learner('previous_action')

@@ -5,7 +5,7 @@ returns": SB3's ``DQN`` whose TD target lets the online network pick the next ac
 target network value it, instead of taking the maximum of the target network's values (which
 overestimates where the actions' true values are close: docs/experiments.md measured it here),
 on SB3's n-step replay buffer.  Each component has a published basis and a flag in
-config/train.yaml (:data:`nav_gym.training.config.COMPONENTS` holds the value that turns it off);
+config/train.yaml (:data:`nav_gym.training.spec.COMPONENTS` holds the value that turns it off);
 all of them off is the Double DQN learner, and ``double_q: false`` with all of them off is SB3's
 own ``DQN`` untouched (the workshop's learner, bit for bit: config/workshop.yaml).
 
@@ -13,7 +13,10 @@ own ``DQN`` untouched (the workshop's learner, bit for bit: config/workshop.yaml
   ``NStepReplayBuffer``;
 - ``dueling``: a dueling head, ``Q = V + A - mean(A)`` (Wang et al. 2016), on the CNN's features;
 - ``augment_shift``: every sampled observation and next observation shifted at random by up to
-  this many pixels with replicated edges (DrQ, Kostrikov et al. 2021; RAD, Laskin et al. 2020);
+  this many pixels with replicated edges (DrQ, Kostrikov et al. 2021; RAD, Laskin et al. 2020),
+  both augmentations in :mod:`nav_gym.training.augment`;
+- ``augment_colour``: the colours of every sampled observation and next observation jittered:
+  brightness, contrast, saturation and hue (RAD, Laskin et al. 2020);
 - ``prioritized_replay``: proportional prioritized replay with importance weights (Schaul et
   al. 2016);
 - ``munchausen``: Munchausen DQN's target (Vieillard et al. 2020), the scaled log-policy of the
@@ -49,6 +52,7 @@ from stable_baselines3.dqn.policies import CnnPolicy, QNetwork
 from torch import nn
 from torch.nn import functional as F
 
+from nav_gym.training.augment import random_colour, random_shift
 from nav_gym.training.aux_depth import (
     DepthCnnPolicy,
     DepthFrameStackReplayBuffer,
@@ -57,34 +61,11 @@ from nav_gym.training.aux_depth import (
     add_depth_head,
     depth_loss,
 )
-from nav_gym.training.config import LearnerSpec
 from nav_gym.training.memory import FrameStackReplayBuffer
+from nav_gym.training.spec import LearnerSpec
 from nav_gym.training.targets import double_q_target, max_q_target, munchausen_target
 
 PRIORITY_EPS = 1e-6  # added to |TD error| so that no transition's priority is zero
-
-
-def random_shift(images: th.Tensor, pad: int, generator: th.Generator | None = None,
-                 ) -> th.Tensor:
-    """Shift each image of ``(N, C, H, W)`` by its own random offset of up to ``pad`` pixels.
-
-    The same as DrQ's augmentation: pad every side by ``pad`` pixels, replicating the edge,
-    then crop an ``H x W`` window at a random position (independent per image, uniform over
-    the ``(2 pad + 1)^2`` positions).  Done as one gather with clamped indices, on any dtype
-    (uint8 here, before SB3 scales the image); ``pad`` 0 returns the images unchanged.
-    """
-    if pad < 0:
-        raise ValueError(f'pad must be >= 0, got {pad}')
-    n, c, h, w = images.shape
-    if pad == 0 or n == 0:
-        return images
-    device = images.device
-    dy = th.randint(-pad, pad + 1, (n, 1), generator=generator, device=device)
-    dx = th.randint(-pad, pad + 1, (n, 1), generator=generator, device=device)
-    rows = (th.arange(h, device=device) + dy).clamp_(0, h - 1)
-    cols = (th.arange(w, device=device) + dx).clamp_(0, w - 1)
-    index = (rows[:, :, None] * w + cols[:, None, :]).reshape(n, 1, h * w).expand(n, c, h * w)
-    return images.reshape(n, c, h * w).gather(2, index).reshape(n, c, h, w)
 
 
 def dueling_q(values: th.Tensor, advantages: th.Tensor) -> th.Tensor:
@@ -254,6 +235,9 @@ class Learner(DQN):
             if spec.augment_shift:
                 obs = random_shift(obs, spec.augment_shift)
                 next_obs = random_shift(next_obs, spec.augment_shift)
+            if spec.augment_colour:
+                obs = random_colour(obs, spec.augment_colour, spec.frame_stack)
+                next_obs = random_colour(next_obs, spec.augment_colour, spec.frame_stack)
             with th.no_grad():
                 next_q_target = self.q_net_target(next_obs)
                 if spec.munchausen:

@@ -105,7 +105,7 @@ def test_onnx_q_values_equal_pytorchs_on_200_observations_from_both_banks(
 
 @pytest.mark.parametrize('flags', [
     {'double_q': False, 'n_steps': 1}, {'dueling': True}, {'augment_shift': 4},
-    {'prioritized_replay': True}])
+    {'augment_colour': 0.2}, {'prioritized_replay': True}])
 def test_every_learner_flag_exports(tmp_path, spaces_only, flags):
     run = make_tiny_run(tmp_path, spaces_only, steps=16, **flags)
     spec = export_policy(run)

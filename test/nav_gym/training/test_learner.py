@@ -11,7 +11,7 @@ from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import NStepReplayBuffer
 
-from nav_gym.training.config import COMPONENTS, LearnerSpec, TrainConfig
+from nav_gym.training.config import TrainConfig
 from nav_gym.training.learner import (
     DuelingCnnPolicy,
     DuelingQNetwork,
@@ -23,8 +23,8 @@ from nav_gym.training.learner import (
     learner_kwargs,
     learner_policy,
     load_checkpoint,
-    random_shift,
 )
+from nav_gym.training.spec import COMPONENTS, LearnerSpec
 from nav_gym.training.targets import double_q_target, max_q_target, munchausen_target
 from nav_sim.core.depth import DEPTH_SHAPE
 
@@ -162,34 +162,6 @@ def test_the_dueling_policy_combines_its_two_streams(spaces_only):
     assert th.allclose(network(obs), expected)
 
 
-# --- random shifts (DrQ) ------------------------------------------------------------------------
-def test_a_shift_of_0_pixels_is_the_identity():
-    images = th.randint(0, 256, (5, 3, 84, 84), dtype=th.uint8)
-    assert random_shift(images, 0) is images
-
-
-def test_a_shift_keeps_shape_and_dtype_and_one_seed_gives_one_result():
-    images = th.randint(0, 256, (8, 3, 84, 84), dtype=th.uint8)
-    first = random_shift(images, 4, th.Generator().manual_seed(7))
-    assert first.shape == images.shape and first.dtype == th.uint8
-    assert th.equal(first, random_shift(images, 4, th.Generator().manual_seed(7)))
-    assert not th.equal(first, random_shift(images, 4, th.Generator().manual_seed(8)))
-
-
-def test_a_shift_is_replicate_padding_then_a_crop_per_image():
-    images = th.arange(2 * 1 * 6 * 6, dtype=th.float32).reshape(2, 1, 6, 6)
-    generator = th.Generator().manual_seed(3)
-    shifted = random_shift(images, 2, generator)
-    padded = th.nn.functional.pad(images, (2, 2, 2, 2), mode='replicate')
-    found = []
-    for i in range(2):  # each image is one of the 25 crops of its own padded image
-        crops = [(dy, dx) for dy in range(5) for dx in range(5)
-                 if th.equal(shifted[i], padded[i, :, dy:dy + 6, dx:dx + 6])]
-        assert len(crops) == 1
-        found.append(crops[0])
-    assert found != [(2, 2), (2, 2)]  # not both left in place
-
-
 # --- prioritized replay -------------------------------------------------------------------------
 def test_the_sum_tree_sums_and_finds_proportionally():
     tree = SumTree(5)
@@ -227,8 +199,9 @@ def test_priorities_follow_td_errors_and_weights_correct_the_sampling():
 @pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')  # SB3's own, on any n-step load
 @pytest.mark.parametrize('spec', [LearnerSpec(), LearnerSpec(augment_shift=4, n_steps=3),
                                   LearnerSpec(dueling=True, prioritized_replay=True),
-                                  LearnerSpec(double_q=False, munchausen=True)],
-                         ids=['default', 'shift+nstep', 'dueling+per', 'munchausen'])
+                                  LearnerSpec(double_q=False, munchausen=True),
+                                  LearnerSpec(augment_colour=0.2)],
+                         ids=['default', 'shift+nstep', 'dueling+per', 'munchausen', 'colour'])
 def test_a_checkpoint_of_the_learner_loads_with_dqn_load(tmp_path, spaces_only, spec):
     model = learner_class(None, spec)(learner_policy(spec), spaces_only(), buffer_size=200,
                                       learning_starts=40, batch_size=8, train_freq=4, seed=1,

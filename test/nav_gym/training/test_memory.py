@@ -170,7 +170,7 @@ def test_an_actor_of_a_frame_stack_learner_keeps_and_begins_its_history(spaces_o
     import torch
 
     from nav_gym.policy.export import export_policy
-    from nav_gym.training.config import LearnerSpec
+    from nav_gym.training.spec import LearnerSpec
 
     spec = LearnerSpec(frame_stack=2)
     _, decisions = two_episodes(spec, FrameStackEnv(DummyVecEnv([spaces_only]), 2), tmp_path)
@@ -187,7 +187,8 @@ def test_an_actor_of_a_frame_stack_learner_keeps_and_begins_its_history(spaces_o
 def test_an_actor_feeds_back_its_previous_action_begun_afresh_at_each_episode(spaces_only,
                                                                                tmp_path):
     from nav_gym.errors import TrainConfigError
-    from nav_gym.training.config import LearnerSpec, TrainConfig
+    from nav_gym.training.config import TrainConfig
+    from nav_gym.training.spec import LearnerSpec
 
     spec = LearnerSpec(previous_action=True)  # memory of what it did, one frame
     model, decisions = two_episodes(spec, FrameStackEnv(DummyVecEnv([spaces_only]), 1,

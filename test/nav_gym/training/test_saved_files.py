@@ -14,13 +14,13 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 
-from nav_gym.training.config import LearnerSpec
 from nav_gym.training.learner import (
     DuelingCnnPolicy,
     Learner,
     PrioritizedReplayBuffer,
     load_checkpoint,
 )
+from nav_gym.training.spec import LearnerSpec
 
 DATA = Path(__file__).parent / 'data'
 
