@@ -86,8 +86,10 @@ def random_colour(images: th.Tensor, strength: float, frames: int = 1,
     if not 1 <= frames <= c // 3:
         raise ValueError(f'{frames} RGB frames do not fit {c} channels')
     matrices, contrast, brightness = colour_transforms(n, strength, generator, images.device)
-    colour = images[:, :3 * frames].float().reshape(n, frames, 3, h, w)
-    offset = brightness * (1 - contrast) * colour.mean(dim=(1, 2, 3, 4))  # around the mean grey
-    jittered = th.einsum('nij,nfjhw->nfihw', matrices, colour) + offset[:, None, None, None, None]
+    colour = images[:, :3 * frames].reshape(n, frames, 3, h * w).float()
+    offset = brightness * (1 - contrast) * colour.mean(dim=(1, 2, 3))  # around the mean grey
+    jittered = th.matmul(matrices[:, None], colour).add_(offset[:, None, None, None])
     jittered = jittered.clamp_(0, 255).reshape(n, 3 * frames, h, w)
+    if c == 3 * frames:
+        return jittered
     return th.cat([jittered, images[:, 3 * frames:].float()], dim=1)
