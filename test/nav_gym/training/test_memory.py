@@ -5,6 +5,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+import torch as th
 from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.vec_env import DummyVecEnv
@@ -253,3 +254,32 @@ def test_a_resume_ends_the_running_episodes_for_n_step_returns_and_memory():
     assert np.allclose(samples.discounts.numpy(), gamma)  # one step, then the cut
     # env 0 was cut (a time-out: bootstrapped), env 1 terminated (not)
     assert list(samples.dones.numpy().reshape(-1)) == [float(e == 1) for e in sampled_envs]
+
+
+@pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
+def test_a_memory_learner_jitters_its_stacks_frames_and_keeps_their_action_planes(
+        spaces_only, monkeypatch):
+    from nav_gym.training import learner
+    from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy
+    from nav_gym.training.spec import LearnerSpec
+
+    calls = []
+    from nav_gym.training.augment import random_colour
+
+    def spy(images, strength, frames=1, generator=None):  # noqa: ANN001, ANN202
+        out = random_colour(images, strength, frames, generator)
+        calls.append((images, strength, frames, out))
+        return out
+
+    monkeypatch.setattr(learner, 'random_colour', spy)
+    spec = LearnerSpec(frame_stack=2, previous_action=True, augment_colour=0.3)
+    envs = FrameStackEnv(DummyVecEnv([spaces_only]), 2, previous_action=True)
+    model = learner_class(None, spec)(learner_policy(spec), envs, buffer_size=200,
+                                      learning_starts=40, batch_size=8, seed=1, device='cpu',
+                                      **learner_kwargs(spec, 0.99))
+    model.learn(60)
+    assert model._n_updates > 0 and len(calls) == 2 * model._n_updates  # obs, next obs
+    for images, strength, frames, out in calls:
+        assert (strength, frames, images.shape[1]) == (0.3, 2, 9)
+        assert th.equal(out[:, 6:], images[:, 6:].float())  # the action planes, as they were
+        assert not th.equal(out[:, :6], images[:, :6].float())  # the probe: frames jittered
