@@ -106,6 +106,7 @@ class TrainConfig:
     previous_action: bool = _learner('previous_action')
     aux_depth: float = _learner('aux_depth')
     munchausen: bool = _learner('munchausen')
+    reset_interval: int = _learner('reset_interval')
     priority_alpha: float = _learner('priority_alpha')
     priority_beta: float = _learner('priority_beta')
     checkpoint_freq: int = setting(10_000, 'steps between checkpoints (all are kept)',

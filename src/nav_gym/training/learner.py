@@ -21,6 +21,8 @@ own ``DQN`` untouched (the workshop's learner, bit for bit: config/workshop.yaml
   al. 2016);
 - ``munchausen``: Munchausen DQN's target (Vieillard et al. 2020), the scaled log-policy of the
   action taken added to the reward and a soft value bootstrapped, in place of Double DQN's;
+- ``reset_interval``: the online network's fully connected layers re-initialised every so many
+  steps, against the primacy bias at a higher replay ratio (Nikishin et al. 2022);
 - ``frame_stack``: the agent's last k frames as its input, replayed from single frames
   (:mod:`nav_gym.training.memory`; DRQN's comparison, Hausknecht & Stone 2015);
 - ``aux_depth``: an auxiliary loss of this weight, a linear head on the online network's
@@ -62,6 +64,7 @@ from nav_gym.training.aux_depth import (
     depth_loss,
 )
 from nav_gym.training.memory import FrameStackReplayBuffer
+from nav_gym.training.resets import reset_fully_connected
 from nav_gym.training.spec import LearnerSpec
 from nav_gym.training.targets import double_q_target, max_q_target, munchausen_target
 
@@ -215,7 +218,22 @@ class Learner(DQN):
     def __init__(self, *args: Any, learner: LearnerSpec | None = None, **kwargs: Any) -> None:
         """Create SB3's DQN; ``learner`` defaults to the Double DQN learner."""
         self.learner = learner or LearnerSpec()
+        self.resets = 0  # of the fully connected layers so far (reset_interval)
         super().__init__(*args, **kwargs)
+
+    def _on_step(self) -> None:
+        """SB3's step bookkeeping, then a reset when one is due (``reset_interval``).
+
+        Counted in vector steps as SB3 counts its target updates, and only once learning has
+        begun; :mod:`nav_gym.training.resets` says what a reset does.
+        """
+        super()._on_step()
+        interval = self.learner.reset_interval
+        if (interval and self.num_timesteps > self.learning_starts
+                and self._n_calls % max(interval // self.n_envs, 1) == 0):
+            reset_fully_connected(self.q_net, self.policy.optimizer)
+            self.resets += 1
+            self.logger.record('train/resets', self.resets)
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
         """Run ``gradient_steps`` gradient steps: SB3's ``DQN.train`` with the spec's changes."""

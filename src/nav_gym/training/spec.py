@@ -24,7 +24,7 @@ from nav_sim.core.config import (
 #: the components' flags (LearnerSpec fields), each with its value that turns the component off
 COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0, 'augment_colour': 0.0,
               'prioritized_replay': False, 'frame_stack': 1, 'previous_action': False,
-              'aux_depth': 0.0, 'munchausen': False}
+              'aux_depth': 0.0, 'munchausen': False, 'reset_interval': 0}
 
 
 @dataclass(frozen=True)
@@ -72,6 +72,11 @@ class LearnerSpec:
                                "the scaled log-policy of the action taken (the target network's "
                                'softmax, tau 0.03, alpha 0.9, clip -1), bootstraps from the soft '
                                'value, and replaces Double DQN (set double_q: false)')
+    reset_interval: int = setting(0, 'every this many env steps, re-initialise the fully '
+                                  'connected layers of the online Q-network (the convolutions '
+                                  'kept) and forget their optimiser state: resets against the '
+                                  'primacy bias, which allow a higher replay ratio '
+                                  '(gradient_steps; Nikishin et al. 2022); 0: off', NON_NEGATIVE)
     priority_alpha: float = setting(0.6, 'prioritized replay: priority = (|TD error| + '
                                     'eps)^alpha', FRACTION)
     priority_beta: float = setting(0.4, 'prioritized replay: importance-weight exponent at the '
@@ -113,6 +118,8 @@ class LearnerSpec:
             (self.previous_action, 'the previous action as input (Mirowski et al. 2017)'),
             (self.aux_depth, f'an auxiliary depth loss of weight {self.aux_depth:g} (Mirowski et '
                              'al. 2017)'),
+            (self.reset_interval, f'resets of the fully connected layers every '
+                                  f'{self.reset_interval} steps (Nikishin et al. 2022)'),
             (self.prioritized_replay, f'prioritized replay (Schaul et al. 2016, alpha '
                                       f'{self.priority_alpha}, beta {self.priority_beta} to 1)'),
         ) if on)
