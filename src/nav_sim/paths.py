@@ -10,8 +10,11 @@ from pathlib import Path
 from nav_sim.errors import WorldNotFoundError
 
 PACKAGE = 'nav_sim'
-#: a user-given name that becomes one path component (a run's, a sweep's)
-PLAIN_NAME = re.compile(r'[A-Za-z0-9_][A-Za-z0-9._-]{0,127}')
+#: the characters of a name that becomes one path component (a run's, a sweep's, a sweep's
+#: configuration and trial names, which hold ``KEY=VALUE``)
+NAME_CHARACTERS = 'A-Za-z0-9_=.-'
+#: a user-given name that becomes one path component: no separator, no leading '.' or '-'
+PLAIN_NAME = re.compile(rf'[A-Za-z0-9_=][{NAME_CHARACTERS}]{{0,127}}')
 
 
 def plain_name_problem(what: str, name: str) -> str | None:
@@ -23,8 +26,8 @@ def plain_name_problem(what: str, name: str) -> str | None:
     """
     if PLAIN_NAME.fullmatch(name):
         return None
-    return (f"{what} must be one plain path component: 1 to 128 letters, digits, '_', '.' "
-            f"or '-', not starting with '.' or '-', got {name!r}")
+    return (f"{what} must be one plain path component: 1 to 128 letters, digits, '_', '=', "
+            f"'.' or '-', not starting with '.' or '-', got {name!r}")
 
 
 def ament_prefixes() -> list[Path]:

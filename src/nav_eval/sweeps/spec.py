@@ -26,7 +26,7 @@ from nav_gym.errors import NavGymError
 from nav_gym.training.config import FIELDS, build
 from nav_sim.core.world import load_arena
 from nav_sim.errors import NavSimError
-from nav_sim.paths import plain_name_problem
+from nav_sim.paths import NAME_CHARACTERS, plain_name_problem
 from nav_sim.ros.process import typed_params
 
 SWEEP_FILE = 'sweep.json'
@@ -112,8 +112,8 @@ class SweepSpec:
 
 
 def slug(text: str) -> str:
-    """Make a directory-safe name (letters, digits, ``=._-``)."""
-    return re.sub(r'[^A-Za-z0-9=._-]+', '-', text).strip('-') or 'config'
+    """Make a directory-safe name of a plain name's characters (``nav_sim.paths``)."""
+    return re.sub(f'[^{NAME_CHARACTERS}]+', '-', text).strip('-.') or 'config'
 
 
 def parse_assignments(items: list[str], multi: bool) -> dict[str, Any]:

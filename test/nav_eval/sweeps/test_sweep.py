@@ -370,6 +370,13 @@ def test_configuration_and_trial_names_and_those_of_older_sweeps(tmp_path):
     # a sweep.json written before configurations were named by --set (no 'naming'): as then
     assert names(fixed=fixed) == [('seed1', 'defaults')]
     assert names(grid={'a': ['1']}) == [('a=1_seed1', 'a=1')]
+    # every trial is a run of that name: a grid's names are plain names (not refused by
+    # nav-gym-train's run_name, as they were between issue 31's check and this test)
+    from nav_gym.training.config import TrainConfig
+    grid = {'world': ['rooms.xml'], 'augment_colour': ['0', '0.2'], 'sim_params': ['{a: 1}']}
+    for name, config in names(grid=grid, naming=NAMING):
+        assert TrainConfig(run_name=name).run_name == name
+        assert TrainConfig(run_name=config).run_name == config
 
 
 @pytest.mark.parametrize(('exit_code', 'returned', 'evaluated'), [
