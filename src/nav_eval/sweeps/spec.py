@@ -244,6 +244,10 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     spec = SweepSpec(str(sweep_dir), seeds['seeds'], grid, fixed, seeds['train_seeds'],
                      seeds['heldout_seeds'], curve, not args.no_baselines, args.record,
                      cpus, args.gpus_per_trial, NAMING)
+    for trial in spec.trials():  # each becomes a run name (long --set values can exceed it)
+        problem = plain_name_problem('a trial name', trial['name'])
+        if problem:
+            raise SweepError(f'{problem}: shorten the --set or --grid values')
     write_configs(spec)  # creates the sweep directory once every grid point is valid
     data = dataclasses.asdict(spec)
     data.pop('sweep_dir')

@@ -224,12 +224,15 @@ class Learner(DQN):
     def _on_step(self) -> None:
         """SB3's step bookkeeping, then a reset when one is due (``reset_interval``).
 
-        Counted in vector steps as SB3 counts its target updates, and only once learning has
-        begun; :mod:`nav_gym.training.resets` says what a reset does.
+        Counted in vector steps as SB3 counts its target updates, only once learning has begun,
+        and only where a whole interval of training follows before the end: a reset never
+        leaves the final model an untrained head.  :mod:`nav_gym.training.resets` says what a
+        reset does.
         """
         super()._on_step()
         interval = self.learner.reset_interval
-        if (interval and self.num_timesteps > self.learning_starts
+        if (interval and self.learning_starts < self.num_timesteps
+                and self.num_timesteps + interval <= self._total_timesteps
                 and self._n_calls % max(interval // self.n_envs, 1) == 0):
             reset_fully_connected(self.q_net, self.policy.optimizer)
             self.resets += 1

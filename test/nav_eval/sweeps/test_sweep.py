@@ -405,3 +405,16 @@ def test_a_trial_gets_a_cpu_per_sim_and_one_for_the_learner_unless_told():
     assert trial_cpus({}, {'n_envs': ['1', '8', '2']}) == 9
     assert trial_cpus({'n_envs': '1'}, {}) == 2
     assert trial_cpus({'n_envs': 'many'}, {}) == 2  # the settings' check names the bad value
+
+
+def test_a_trial_name_too_long_for_a_run_name_is_refused_before_anything_is_written(tmp_path):
+    from nav_eval.errors import SweepError
+    from nav_eval.sweep import build_parser
+    from nav_eval.sweeps.spec import spec_from_args
+    long_rate = '0.0001' + '0' * 110 + '1'  # a configuration name cut at its 120 characters
+    args = build_parser().parse_args(['--storage', str(tmp_path), '--name', 'long', '--grid',
+                                      f'learning_rate={long_rate},0.0002', '--seeds',
+                                      '1,4000000000', '--no-baselines'])
+    with pytest.raises(SweepError, match=r'a trial name must be .*: shorten the --set or --grid'):
+        spec_from_args(args)
+    assert not (tmp_path / 'long').exists()

@@ -69,6 +69,9 @@ def test_each_part_of_the_jitter_stays_within_its_strength():
         assert factor.max() - factor.min() > 1.8 * strength  # the probe: it spans the range
     grey = th.ones(3)
     assert th.allclose(matrices @ grey, (brightness * contrast)[:, None] * grey, atol=1e-5)
+    # columns sum to brightness x contrast too: the image's mean grey is scaled, not shifted
+    assert th.allclose(matrices.sum(dim=1), (brightness * contrast)[:, None].expand(n, 3),
+                       atol=1e-5)
     red = th.tensor([1.0, 0.0, 0.0])  # a pure chroma: the turn of its hue is the hue jitter
     turned = (_hue(matrices @ red) - _hue(red)).abs()
     limit = math.radians(strength * HUE_DEGREES)
