@@ -270,10 +270,7 @@ class Learner(DQN):
                                              self.q_net(next_obs), next_q_target)
                 else:
                     target = max_q_target(data.rewards, data.dones, discounts, next_q_target)
-            if spec.aux_depth:
-                values, features = q_and_features(self.q_net, obs)
-            else:
-                values = self.q_net(obs)
+            values, features = q_and_features(self.q_net, obs)  # the features: aux_depth's
             current = th.gather(values, dim=1, index=data.actions.long())
             if prioritized:
                 weights = th.as_tensor(buffer.last_weights, device=self.device).reshape(-1, 1)
