@@ -63,7 +63,8 @@ class DepthTargets:
 
     The depth of the frame a transition starts from is the one ``info['depth']`` gave with the
     step that led to it; an episode's first frame came with its reset, which SB3 does not pass
-    to the buffer, so its depth stays unknown (NaN) and the loss skips it.  ``_get_samples``
+    to the buffer: the learner gives it (:func:`begin_depths`), and without it the depth stays
+    unknown (NaN) and the loss skips it.  ``_get_samples``
     keeps the sampled ones in ``last_depths`` ``(batch, cells)`` float32, found at the same
     (position, env) as the observations: SB3 draws the env of each sample as its first random
     number, which this draws again from the same state.
@@ -106,3 +107,19 @@ class DepthReplayBuffer(DepthTargets, NStepReplayBuffer):
 
 class DepthFrameStackReplayBuffer(DepthTargets, FrameStackReplayBuffer):
     """The frame-stack buffer with depth targets (each stack's newest frame's depth)."""
+
+
+def begin_depths(buffer: Any, venv: Any, envs: Any) -> None:
+    """Give the first frame of each of ``envs``' new episodes the depth its reset gave.
+
+    SB3 passes a buffer the infos of steps only; the VecEnv keeps each env's latest reset info
+    (``reset_infos``, on the innermost VecEnv: a wrapper has its own).  Nothing for a buffer
+    without depth targets.
+    """
+    if not isinstance(buffer, DepthTargets):
+        return
+    infos = venv.unwrapped.reset_infos
+    for env in envs:
+        depth = infos[env].get(DEPTH_KEY)
+        if depth is not None:
+            buffer.pending[env] = np.ravel(depth)

@@ -276,6 +276,36 @@ def _depth_env(spaces_only):
     return WithDepth
 
 
+@pytest.mark.parametrize('memory', [False, True])
+def test_an_episodes_first_frame_gets_the_depth_of_its_reset(spaces_only, memory):
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from nav_gym.training.memory import FrameStackEnv
+
+    class Episodes(_depth_env(spaces_only)):  # 7-step episodes; a reset's depth is 2.5 m
+        def reset(self, *, seed=None, options=None):
+            self.t = 0
+            obs, info = super().reset(seed=seed, options=options)
+            return obs, {**info, 'depth': np.full(DEPTH_SHAPE, 2.5, np.float32)}
+
+        def step(self, action):
+            self.t += 1
+            obs, reward, _, truncated, info = super().step(action)
+            return obs, reward, self.t % 7 == 0, truncated, info
+
+    spec = LearnerSpec(aux_depth=1.0, frame_stack=2 if memory else 1)
+    envs = DummyVecEnv([Episodes, Episodes])
+    model = learner_class(None, spec)(learner_policy(spec), FrameStackEnv(envs, 2) if memory
+                                      else envs, buffer_size=200, learning_starts=100,
+                                      batch_size=8, seed=1, device='cpu',
+                                      **learner_kwargs(spec, 0.99))
+    model.learn(40)  # 20 steps per env: three episodes begin in each
+    depths = model.replay_buffer.depths[:model.replay_buffer.pos, :, 0]
+    assert not np.isnan(depths).any()
+    firsts = depths[[0, 7, 14]]  # the transitions that start from an episode's first frame
+    assert (firsts == 2.5).all() and (np.delete(depths, [0, 7, 14], axis=0) != 2.5).all()
+
+
 @pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
 @pytest.mark.parametrize('dueling', [False, True])
 def test_the_depth_head_trains_and_never_changes_the_action(tmp_path, spaces_only, dueling):
