@@ -100,10 +100,14 @@ def stop_on_sigterm() -> None:
     """Handle SIGTERM as Ctrl-C from now on (a stopped run saves a checkpoint and exits 130).
 
     For the commands that train or evaluate: ``kill``, a Ray worker's end or a closing
-    terminal stop them as Ctrl-C does, with the same cleanup.
+    terminal stop them as Ctrl-C does, with the same cleanup.  Only the first SIGTERM does:
+    the process is stopping, and a later one must not cut the checkpoint it saves.  A sweep's
+    trial gets several as Ray's processes end (its parent death signal again for each ancestor
+    that ends), and the second one used to land in the middle of that save.
     """
     signal.signal(signal.SIGTERM, _raise_keyboard_interrupt)
 
 
 def _raise_keyboard_interrupt(signum: int, frame: Any) -> None:
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)  # stopping already (see stop_on_sigterm)
     raise KeyboardInterrupt

@@ -75,13 +75,14 @@ def run_child(command: list[str], env: dict[str, str], log: Path, what: str = ''
         handle.write(f'\n$ {" ".join(command)}\n'.encode())
         handle.flush()
         start = time.monotonic()
-        # its own session: signals to the worker's process group do not reach it; it gets
-        # exactly one SIGTERM when the worker dies (and then saves a checkpoint and exits)
+        # its own session: signals to the worker's process group do not reach it; it gets a
+        # SIGTERM when the worker dies (and then saves a checkpoint and exits)
         process = subprocess.Popen(command, stdout=handle, stderr=subprocess.STDOUT, env=env,
                                    stdin=subprocess.DEVNULL, preexec_fn=child_preexec,
                                    start_new_session=True)
-        # if this thread ends early (the trial is stopped), the child gets its one SIGTERM
-        # from PR_SET_PDEATHSIG: a second signal would interrupt the checkpoint it then saves
+        # if this thread ends early (the trial is stopped), the child gets a SIGTERM from
+        # PR_SET_PDEATHSIG, and again as each ancestor ends: it acts on the first only
+        # (nav_gym.cli.stop_on_sigterm), so that none cuts the checkpoint it then saves
         code = process.wait()
         handle.write(f'# exit code {code} after {time.monotonic() - start:.1f} s\n'.encode())
     if code != 0:

@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -91,6 +92,26 @@ def interrupt_while_writing(tmp: Path, process: subprocess.Popen, out: Output,
         process.send_signal(signal.SIGINT)
         while pipe.read(1 << 16):
             pass
+
+def test_only_the_first_sigterm_stops_a_run_so_a_second_cannot_cut_its_save():
+    """A sweep's trial gets SIGTERM more than once as Ray's processes end; the first counts.
+
+    The second used to land in the middle of the checkpoint the stopping run saved (R1 lost
+    its newest progress twice so): it is ignored now, and the save completes.
+    """
+    from nav_gym.cli import stop_on_sigterm
+    previous = signal.getsignal(signal.SIGTERM)
+    try:
+        stop_on_sigterm()
+        with pytest.raises(KeyboardInterrupt):  # the first: stop as Ctrl-C does
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5)
+        os.kill(os.getpid(), signal.SIGTERM)  # the second, while the run saves: nothing
+        time.sleep(0.2)
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
 
 def temporary_files(run_dir: Path) -> list[Path]:
     return [p for p in run_dir.rglob('*') if p.name.endswith('.tmp')]
