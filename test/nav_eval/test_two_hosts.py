@@ -136,7 +136,8 @@ def test_training_attaches_to_a_sim_on_the_other_host_and_not_without_the_link(h
     sim = hosts.start(0, [*executable_command(), *ros_args('/two')], DDS, tmp_path / 'sim.log')
     wait_until(lambda: 'nav_sim ready' in (tmp_path / 'sim.log').read_text(), 60.0, 'the sim')
     train = [str(BIN / 'nav-gym-train'), '--sim', 'attach', '--namespace', '/two',
-             '--total-timesteps', '300', '--runs-dir', str(tmp_path), '--sim-timeout', '10']
+             '--total-timesteps', '300', '--buffer-size', '500', '--runs-dir', str(tmp_path),
+             '--sim-timeout', '10']
     result = hosts.run(1, [*train, '--run-name', 'across'], DDS, timeout=600)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
     assert (tmp_path / 'across' / 'final_model.zip').is_file()

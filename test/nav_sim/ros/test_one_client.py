@@ -25,38 +25,43 @@ from nav_sim.ros.process import SimProcess
 TRAIN = str(Path(sys.prefix) / 'bin' / 'nav-gym-train')
 
 
-def test_a_second_trainer_is_refused_at_once_and_the_first_finishes(tmp_path, namespace):
+def test_a_second_trainer_is_refused_at_once_while_the_first_trains_on(tmp_path, namespace):
     with SimProcess(namespace, {}) as sim:
         observer = Observer(namespace)
         try:
             first = subprocess.Popen(
                 [TRAIN, '--sim', 'attach', '--namespace', namespace, '--runs-dir',
-                 str(tmp_path), '--run-name', 'first', '--total-timesteps', '120',
-                 '--learning-starts', '60', '--checkpoint-freq', '60', '--sim-timeout', '30'],
+                 str(tmp_path), '--run-name', 'first', '--total-timesteps', '100000',
+                 '--learning-starts', '60', '--checkpoint-freq', '100000', '--buffer-size',
+                 '500', '--sim-timeout', '30'],
                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-            wait_until(lambda: (tmp_path / 'first' / 'monitor.csv').exists()
-                       or first.poll() is not None, 120.0, 'the first run training')
+            # an observer (a plain subscriber) hears the sim all along, never refused: it
+            # spins from before the first run's first step to its end
+            observer.spin_until(lambda: (tmp_path / 'first' / 'monitor.csv').exists()
+                                or first.poll() is not None, 120.0, 'the first run training')
             started = time.monotonic()
-            second = subprocess.run(
+            second = subprocess.Popen(
                 [TRAIN, '--sim', 'attach', '--namespace', namespace, '--runs-dir',
                  str(tmp_path), '--run-name', 'second', '--total-timesteps', '120',
-                 '--sim-timeout', '30'], capture_output=True, text=True, timeout=120)
+                 '--sim-timeout', '30'], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                text=True)
+            observer.spin_until(lambda: second.poll() is not None, 120.0, 'the second run')
             refused_in = time.monotonic() - started
-            # an observer (a plain subscriber) hears the sim all along, never refused
-            observer.spin_until(lambda: first.poll() is not None, 300.0, 'the first run')
-            out, err = first.communicate(timeout=60)
+            second_err = second.communicate(timeout=60)[1]
+            images = observer.images
+            observer.spin_until(lambda: observer.images > images, 60.0, 'the first run going on')
+            still_training = first.poll() is None
         finally:
             observer.close()
-            if first.poll() is None:
-                interrupt(first)
+            code, output = interrupt(first, timeout=120)
         assert sim.alive()
-    assert first.returncode == 0, out + err
-    assert second.returncode == 1 and refused_in < 20.0, second.stderr
-    (line,) = second.stderr.strip().splitlines()
+    assert second.returncode == 1 and refused_in < 20.0, second_err
+    (line,) = second_err.strip().splitlines()
     assert line.startswith(f"nav-gym-train: error: the sim in namespace '{namespace}' is in "
                            'use:'), line
     assert 'one controlling client at a time' in line
-    assert (tmp_path / 'first' / 'final_model.zip').exists()
+    assert still_training and code == 130 and 'interrupted at step' in output, output
+    assert 'Traceback' not in output
     assert observer.images > 10
 
 
