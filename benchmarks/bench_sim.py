@@ -9,12 +9,18 @@ Target: the round trip reaches at least 60% of the in-process rate.
 
 Also the CPU an idle lockstep sim uses (no client; target < 1 % of a core): its CPU time from
 ``/proc/PID/stat`` over ``--idle-seconds`` of idling.
+
+And the floor of any lockstep through DDS (``--floor-trips``, 0 to skip): a bare round trip of a
+``Twist`` each way between this process and a child (``--echo``), through bare rcl wait sets with
+the client's QoS, no sim and no images.  The in-process period plus that round trip bounds the
+ratio a lockstep client of a separate sim process could reach on this machine.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -23,8 +29,14 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 
-from nav_sim.core.kinematics import twist_to_wheels
+import rclpy  # noqa: E402
+from geometry_msgs.msg import Twist  # noqa: E402
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy  # noqa: E402
+from rclpy.signals import SignalHandlerOptions  # noqa: E402
+
+from nav_sim.core.kinematics import twist_to_wheels  # noqa: E402
 from nav_sim.core.sim import NavSim  # noqa: E402
+from nav_sim.ros import qos  # noqa: E402
 from nav_sim.ros.client import SimClient  # noqa: E402
 from nav_sim.ros.process import SimProcess  # noqa: E402
 
@@ -81,6 +93,72 @@ def idle_cpu(seconds: float) -> float:
         return (cpu_seconds(sim.process.pid) - before) / (time.monotonic() - start)
 
 
+def _bare_node(name: str, namespace: str) -> tuple[rclpy.Context, rclpy.node.Node]:
+    context = rclpy.Context()
+    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    return context, rclpy.create_node(name, namespace=namespace, context=context,
+                                      start_parameter_services=False, enable_rosout=False)
+
+
+def _take(context: rclpy.Context, subscription: object, timeout_s: float) -> Twist | None:
+    """Wait on ``subscription`` alone, as the lockstep hot paths do; its message or None."""
+    wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, context.handle)
+    wait_set.add_subscription(subscription.handle)
+    wait_set.wait(int(timeout_s * 1e9))
+    if subscription.handle.pointer in wait_set.get_ready_entities('subscription'):
+        taken = subscription.handle.take_message(Twist, subscription.raw)
+        return taken[0] if taken is not None else None
+    return None
+
+
+def echo(namespace: str) -> None:
+    """Send every ``ping`` back on ``pong`` (the floor's child); end on a negative ``linear.x``."""
+    context, node = _bare_node('bench_echo', namespace)
+    pong = node.create_publisher(Twist, 'pong', qos.OBSERVATION)
+    ping = node.create_subscription(Twist, 'ping', lambda _: None, qos.CONTROL)
+    deadline = time.monotonic() + 300.0
+    while time.monotonic() < deadline:
+        message = _take(context, ping, 0.2)
+        if message is not None:
+            pong.publish(message)
+            if message.linear.x < 0:
+                break
+    context.try_shutdown()
+
+
+def dds_floor(trips: int) -> float:
+    """Median seconds of a bare ``Twist`` round trip to a child process and back."""
+    namespace = f'/bench_floor_{os.getpid()}'
+    context, node = _bare_node('bench_floor', namespace)
+    ping = node.create_publisher(Twist, 'ping', qos.CONTROL)
+    pong = node.create_subscription(Twist, 'pong', lambda _: None, qos.OBSERVATION)
+    child = subprocess.Popen([sys.executable, __file__, '--echo', namespace])
+    try:
+        deadline = time.monotonic() + 30.0
+        while ping.get_subscription_count() == 0 or pong.get_publisher_count() == 0:
+            if time.monotonic() > deadline or child.poll() is not None:
+                raise SystemExit('bench_sim: the echo process did not connect within 30 s')
+            time.sleep(0.05)
+        message, times = Twist(), []
+        for i in range(trips + 100):  # the first 100 warm up
+            message.angular.z = float(i)
+            start = time.perf_counter()
+            ping.publish(message)
+            while (answer := _take(context, pong, 5.0)) is None or answer.angular.z != i:
+                if answer is None:
+                    raise SystemExit('bench_sim: no echo within 5 s')
+            times.append(time.perf_counter() - start)
+        message.linear.x = -1.0
+        ping.publish(message)
+        child.wait(timeout=10)
+    finally:
+        if child.poll() is None:
+            child.kill()
+            child.wait()
+        context.try_shutdown()
+    return sorted(times[100:])[trips // 2]
+
+
 def main() -> None:
     """Measure both rates in alternating runs, then the idle sim's CPU; print them."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -88,11 +166,19 @@ def main() -> None:
     parser.add_argument('--repeats', type=int, default=3, help='alternating runs; best kept')
     parser.add_argument('--idle-seconds', type=float, default=5.0,
                         help='how long the idle sim is measured')
+    parser.add_argument('--floor-trips', type=int, default=2000,
+                        help='round trips of the DDS floor per run (0: skip it)')
+    parser.add_argument('--echo', metavar='NAMESPACE', help=argparse.SUPPRESS)
     args = parser.parse_args()
-    core, ros = [], []
+    if args.echo:
+        echo(args.echo)
+        return
+    core, ros, floor = [], [], []
     for _ in range(args.repeats):
         core.append(in_process(args.periods))
         ros.append(through_ros(args.periods))
+        if args.floor_trips:
+            floor.append(dds_floor(args.floor_trips))
     best_core, best_ros = max(core), max(ros)
     print(f'control periods/s, {args.periods} periods, best of {args.repeats} alternating runs')
     print(f'  sim core in process (step + render):    {best_core:8.0f} /s  '
@@ -102,6 +188,13 @@ def main() -> None:
     ratio = best_ros / best_core
     print(f'  ratio round trip / in process:          {ratio:8.1%}  (target >= 60%: '
           f"{'met' if ratio >= 0.6 else 'NOT met'})")
+    if floor:
+        best_floor = min(floor)
+        ceiling = (1 / best_core) / (1 / best_core + best_floor)
+        print(f'  DDS floor: a bare Twist round trip:     {best_floor * 1e6:8.0f} us median  '
+              f'runs: {[round(v * 1e6) for v in floor]}')
+        print(f'  lockstep ceiling with that floor alone: {ceiling:8.1%}  (in-process period + '
+              'the floor; no image, no event)')
     idle = idle_cpu(args.idle_seconds)
     print(f'  idle lockstep sim, no client:           {idle:8.2%} of a core over '
           f"{args.idle_seconds:g} s  (target < 1%: {'met' if idle < 0.01 else 'NOT met'})")
