@@ -27,7 +27,7 @@ from nav_gym.env.observation import OBS_SHAPE
 from nav_gym.errors import PolicyModelError, TrainConfigError
 from nav_gym.policy.config import PolicyConfig
 from nav_gym.policy.exported import META_FILE, OnnxActor, is_export, read_export
-from nav_gym.policy.history import EpisodeMemory
+from nav_gym.policy.history import EpisodeMemory, GreedyActor
 from nav_gym.policy.servo import servo_act, servo_band
 from nav_gym.training.config import TrainConfig
 from nav_gym.training.run_dir import FINAL_MODEL, is_run_dir, load_config
@@ -75,7 +75,7 @@ class Actor(Protocol):
         ...
 
 
-class DQNActor:
+class DQNActor(GreedyActor):
     """A frozen DQN: the greedy action and its Q-values from one forward pass.
 
     The greedy action is the one ``predict(deterministic=True)`` takes (argmax of the same
@@ -97,7 +97,7 @@ class DQNActor:
         """Act with ``model``, with a history where its network takes its last frames."""
         self.model = model
         model.policy.set_training_mode(False)
-        spec = getattr(model, 'learner', None)  # SB3's own DQN has none: no memory
+        spec = getattr(model, 'learner', None)  # SB3's own DQN has none: one frame
         n_actions = int(model.action_space.n) if getattr(spec, 'previous_action', False) else 0
         self.memory = EpisodeMemory.of(model.observation_space.shape[0], OBS_SHAPE[0],
                                        n_actions)
@@ -112,28 +112,12 @@ class DQNActor:
             raise PolicyModelError(f'cannot read the model {path} ({type(exc).__name__}: '
                                    f'{exc})') from None
 
-    def begin_episode(self, seed: int | None) -> None:
-        """Start an episode: a frame history begins again at the next observation."""
-        if self.memory is not None:
-            self.memory.begin_episode()
-
-    def carried_out(self, action: int) -> None:
-        """Note the action carried out instead of the greedy one: the memory's previous action."""
-        if self.memory is not None:
-            self.memory.carried_out(action)
-
-    def act(self, observation: np.ndarray) -> tuple[int, tuple[float, ...]]:
-        """Return argmax Q (what ``predict(deterministic=True)`` returns) and the Q-values."""
+    def q_values(self, network_input: np.ndarray) -> np.ndarray:
+        """Return the Q-values of one input, whose argmax ``predict(deterministic=True)`` takes."""
         import torch
-        if self.memory is not None:  # the episode's first observation begins the history
-            observation = self.memory.observe(observation)
-        tensor, _ = self.model.policy.obs_to_tensor(observation)
+        tensor, _ = self.model.policy.obs_to_tensor(network_input)
         with torch.no_grad():
-            q_values = self.model.q_net(tensor)[0].cpu().numpy()
-        action = int(np.argmax(q_values))
-        if self.memory is not None:
-            self.memory.chose(action)
-        return action, tuple(round(float(q), 6) for q in q_values)
+            return self.model.q_net(tensor)[0].cpu().numpy()
 
 
 class ServoActor:

@@ -30,7 +30,7 @@ import numpy as np
 from nav_gym.env.actions import ACTION_NAMES
 from nav_gym.env.observation import OBS_SHAPE
 from nav_gym.errors import PolicyModelError
-from nav_gym.policy.history import EpisodeMemory
+from nav_gym.policy.history import EpisodeMemory, GreedyActor
 
 EXPORT_DIR = 'export'            # RUN/export
 ONNX_FILE = 'policy.onnx'
@@ -107,7 +107,7 @@ def read_export(path: str | Path) -> ExportSpec:
     return ExportSpec(path, twists, period, hfov, meta)
 
 
-class OnnxActor:
+class OnnxActor(GreedyActor):
     """The exported Q-network on ONNX Runtime: argmax Q, and the Q-values (as DQNActor)."""
 
     name = 'dqn'
@@ -145,27 +145,7 @@ class OnnxActor:
             raise PolicyModelError(f'{spec.onnx}: its input {inputs[0].shape} does not fit '
                                    f'{META_FILE} ({exc})') from None
 
-    def begin_episode(self, seed: int | None) -> None:
-        """Start an episode: a memory's history begins again at the next observation."""
-        if self.memory is not None:
-            self.memory.begin_episode()
-
-    def carried_out(self, action: int) -> None:
-        """Note the action carried out instead of the greedy one: the memory's previous action."""
-        if self.memory is not None:
-            self.memory.carried_out(action)
-
-    def q_values(self, observation: np.ndarray) -> np.ndarray:
+    def q_values(self, network_input: np.ndarray) -> np.ndarray:
         """Return the Q-values of the network's input (a frame, or a memory's stack)."""
-        batch = np.ascontiguousarray(observation, dtype=np.uint8)[None]
+        batch = np.ascontiguousarray(network_input, dtype=np.uint8)[None]
         return self.session.run([OUTPUT_NAME], {INPUT_NAME: batch})[0][0]
-
-    def act(self, observation: np.ndarray) -> tuple[int, tuple[float, ...]]:
-        """Return argmax Q and the Q-values of one (3, 84, 84) frame, as DQNActor does."""
-        if self.memory is not None:
-            observation = self.memory.observe(observation)
-        q_values = self.q_values(observation)
-        action = int(np.argmax(q_values))
-        if self.memory is not None:
-            self.memory.chose(action)
-        return action, tuple(round(float(q), 6) for q in q_values)

@@ -94,17 +94,18 @@ class EpisodeMemory:
         self._action = NO_ACTION
 
     @classmethod
-    def of(cls, channels: int, frame_channels: int, n_actions: int) -> EpisodeMemory | None:
-        """Return the memory of a network taking ``channels`` input channels, or None.
+    def of(cls, channels: int, frame_channels: int, n_actions: int) -> EpisodeMemory:
+        """Return the memory of a network taking ``channels`` input channels.
 
         ``frame_channels``: one frame's (3); ``n_actions``: the action planes it takes (0 for
-        none).  A network of one frame and no planes keeps no memory.
+        none).  A network of one frame and no planes gets a memory of one frame: the frame
+        alone is its input.
         """
         k = (channels - n_actions) // frame_channels
         if k < 1 or k * frame_channels + n_actions != channels:
             raise ValueError(f'{channels} input channels are not k frames of {frame_channels} '
                              f'and {n_actions} action planes')
-        return cls(k, n_actions) if k > 1 or n_actions else None
+        return cls(k, n_actions)
 
     def begin_episode(self) -> None:
         """Start an episode: the next frame begins the history."""
@@ -122,6 +123,36 @@ class EpisodeMemory:
         self._action = int(action)
 
     carried_out = chose  # an action carried out instead of the chosen one takes its place
+
+
+class GreedyActor:
+    """The greedy actor over its memory: the rule of the checkpoint's actor and the ONNX one.
+
+    A subclass sets ``memory`` (:meth:`EpisodeMemory.of` its network's input) and gives the
+    Q-values of one network input (:meth:`q_values`); this class keeps the acting protocol's
+    episode hook and chooses argmax Q.
+    """
+
+    memory: EpisodeMemory
+
+    def q_values(self, network_input: np.ndarray) -> np.ndarray:
+        """Return the network's Q-values for one input (a frame, or a memory's stack)."""
+        raise NotImplementedError
+
+    def begin_episode(self, seed: int | None) -> None:
+        """Start an episode: the memory begins again at the next observation."""
+        self.memory.begin_episode()
+
+    def carried_out(self, action: int) -> None:
+        """Note the action carried out instead of the greedy one: the memory's previous action."""
+        self.memory.carried_out(action)
+
+    def act(self, observation: np.ndarray) -> tuple[int, tuple[float, ...]]:
+        """Return argmax Q of one (3, 84, 84) frame (with the memory's) and the Q-values."""
+        q_values = self.q_values(self.memory.observe(observation))
+        action = int(np.argmax(q_values))
+        self.memory.chose(action)
+        return action, tuple(round(float(q), 6) for q in q_values)
 
 
 def history_positions(positions: np.ndarray, k: int, size: int,
