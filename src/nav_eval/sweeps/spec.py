@@ -82,6 +82,11 @@ class SweepSpec:
             named = point or (self.fixed if self.naming >= 2 else {})
             name = slug('_'.join(f'{k}={v}' for k, v in named.items()))[:MAX_NAME]
             out.append((name if named else 'defaults', {**self.fixed, **point}))
+        names = [name for name, _ in out]
+        for name in names:
+            if names.count(name) > 1:  # cut at MAX_NAME, they would share one config file
+                raise SweepError(f'two configurations are both named {name!r} (names are cut at '
+                                 f"{MAX_NAME} characters): shorten the grid's values")
         return out
 
     def trials(self) -> list[dict[str, Any]]:

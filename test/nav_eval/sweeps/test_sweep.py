@@ -418,3 +418,16 @@ def test_a_trial_name_too_long_for_a_run_name_is_refused_before_anything_is_writ
     with pytest.raises(SweepError, match=r'a trial name must be .*: shorten the --set or --grid'):
         spec_from_args(args)
     assert not (tmp_path / 'long').exists()
+
+
+def test_grid_points_that_share_a_name_once_cut_are_refused(tmp_path):
+    from nav_eval.errors import SweepError
+    from nav_eval.sweeps.spec import MAX_NAME, SweepSpec
+    prefix = '0.' + '0' * (MAX_NAME - len('learning_rate=0.'))
+    spec = SweepSpec(sweep_dir=str(tmp_path), seeds=[1],
+                     grid={'learning_rate': [prefix + '1', prefix + '2']})
+    with pytest.raises(SweepError, match=r'both named .* cut at 120 characters'):
+        spec.configurations()
+    spec.grid['learning_rate'] = ['0.0001', '0.0002']
+    assert [n for n, _ in spec.configurations()] == ['learning_rate=0.0001',
+                                                     'learning_rate=0.0002']
