@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from nav_eval.analysis import anatomy, calibration
+from nav_eval.errors import SweepError
 from nav_eval.seeds import HELDOUT_BANK, TRAIN_BANK, seed_text
 from nav_eval.sweeps.spec import (
     TRIALS,
@@ -159,6 +160,6 @@ def trial_configs(folder: Path, spec: dict[str, Any]) -> dict[str, str]:
         return {}
     try:
         trials = SweepSpec(**{**spec, 'sweep_dir': str(folder)}).trials()
-    except TypeError:
+    except (TypeError, SweepError):  # another version's spec, or one whose names clash
         return {}
     return {t['name']: t['config'] for t in trials if t['kind'] == 'train'}

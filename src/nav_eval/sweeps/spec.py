@@ -85,8 +85,9 @@ class SweepSpec:
         names = [name for name, _ in out]
         for name in names:
             if names.count(name) > 1:  # cut at MAX_NAME, they would share one config file
-                raise SweepError(f'two configurations are both named {name!r} (names are cut at '
-                                 f"{MAX_NAME} characters): shorten the grid's values")
+                raise SweepError(f'two grid points are both named {name!r} (a repeated value, '
+                                 'values alike once made path-safe, or names alike in their '
+                                 f"first {MAX_NAME} characters): make the grid's values differ")
         return out
 
     def trials(self) -> list[dict[str, Any]]:

@@ -426,7 +426,10 @@ def test_grid_points_that_share_a_name_once_cut_are_refused(tmp_path):
     prefix = '0.' + '0' * (MAX_NAME - len('learning_rate=0.'))
     spec = SweepSpec(sweep_dir=str(tmp_path), seeds=[1],
                      grid={'learning_rate': [prefix + '1', prefix + '2']})
-    with pytest.raises(SweepError, match=r'both named .* cut at 120 characters'):
+    with pytest.raises(SweepError, match=r'both named .* first 120 characters'):
+        spec.configurations()
+    spec.grid['learning_rate'] = ['0.0001', '0.0001']
+    with pytest.raises(SweepError, match='a repeated value'):
         spec.configurations()
     spec.grid['learning_rate'] = ['0.0001', '0.0002']
     assert [n for n, _ in spec.configurations()] == ['learning_rate=0.0001',
