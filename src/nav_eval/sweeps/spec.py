@@ -84,7 +84,7 @@ class SweepSpec:
             out.append((name if named else 'defaults', {**self.fixed, **point}))
         names = [name for name, _ in out]
         for name in names:
-            if names.count(name) > 1:  # cut at MAX_NAME, they would share one config file
+            if names.count(name) > 1:  # they would share one config file and trial folders
                 raise SweepError(f'two grid points are both named {name!r} (a repeated value, '
                                  'values alike once made path-safe, or names alike in their '
                                  f"first {MAX_NAME} characters): make the grid's values differ")

@@ -67,8 +67,9 @@ def test_a_second_trainer_is_refused_at_once_while_the_first_trains_on(tmp_path,
     assert line.startswith(f"nav-gym-train: error: the sim in namespace '{namespace}' is in "
                            'use:'), line
     assert 'one controlling client at a time' in line
+    # the observer heard images before the second run and after its refusal (the waits above)
     assert still_training and code == 130 and 'interrupted at step' in output, output
-    assert 'Traceback' not in output  # the observer heard images before and after the refusal
+    assert 'Traceback' not in output
 
 
 class Observer:
