@@ -28,6 +28,7 @@ from nav_gym.training.checkpoints import (
 from nav_gym.training.config import TrainConfig
 from nav_gym.training.files import atomic_write, link, write_text
 from nav_gym.training.live_hooks import training_callback
+from nav_gym.training.progress import progress_callback
 from nav_gym.training.run_dir import (
     CHECKPOINTS,
     CONFIG,
@@ -164,12 +165,14 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, hint: str,
         if not resume:
             save_checkpoint(model, run_dir, with_buffer=False)  # step-0 reference
         failure, error = None, None
+        terminal = sys.stdout.isatty()  # a progress bar there; progress lines in a log
+        callbacks = [make_callback(config, run_dir), training_callback(env.first)]
+        if not terminal:
+            callbacks.append(progress_callback(config.total_timesteps))
         try:
-            model.learn(max(config.total_timesteps - steps_before, 0),
-                        callback=[make_callback(config, run_dir),
-                                  training_callback(env.first)],
+            model.learn(max(config.total_timesteps - steps_before, 0), callback=callbacks,
                         reset_num_timesteps=not resume,
-                        tb_log_name='dqn', progress_bar=sys.stdout.isatty())
+                        tb_log_name='dqn', progress_bar=terminal)
             outcome = 'finished'
         except KeyboardInterrupt:
             outcome = 'interrupted'
