@@ -132,18 +132,15 @@ def inference(run: Path, images: list) -> tuple[list[float], list[float]]:
 
 def throughput(run: Path, images: list, seconds: float) -> float:
     """Distinct images per second the policy node process decided on (camera at full rate)."""
-    import rclpy
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import Image, JointState
 
     from nav_gym.policy.process import PolicyProcess
     from nav_sim import interface
     from nav_sim.ros import qos
+    from nav_sim.ros.bare import own_node
     namespace = f'/bench_policy_{os.getpid()}'
-    context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node('bench_camera', namespace=namespace, context=context)
+    context, node = own_node('bench_camera', namespace)
     camera = node.create_publisher(Image, interface.IMAGE_TOPIC, qos.OBSERVATION)
     decided: dict[int, float] = {}
     node.create_subscription(JointState, interface.DECISION_TOPIC, lambda m: decided.setdefault(
@@ -199,18 +196,15 @@ def onnx_against_torch(run: Path, out: Path, images: list) -> tuple[list[float],
 
 def node_memory_mb(model: Path, image: object) -> float:
     """Resident memory (MB) of a policy node process on ``model`` once it has decided."""
-    import rclpy
     from rclpy.executors import SingleThreadedExecutor
-    from rclpy.signals import SignalHandlerOptions
     from sensor_msgs.msg import Image, JointState
 
     from nav_gym.policy.process import PolicyProcess
     from nav_sim import interface
     from nav_sim.ros import qos
+    from nav_sim.ros.bare import own_node
     namespace = f'/bench_policy_memory_{os.getpid()}'
-    context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    node = rclpy.create_node('bench_camera', namespace=namespace, context=context)
+    context, node = own_node('bench_camera', namespace)
     camera = node.create_publisher(Image, interface.IMAGE_TOPIC, qos.OBSERVATION)
     decided: list[float] = []
     node.create_subscription(JointState, interface.DECISION_TOPIC,

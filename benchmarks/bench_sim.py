@@ -29,14 +29,12 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(1 + os.getpid() % 100))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 
-import rclpy  # noqa: E402
 from geometry_msgs.msg import Twist  # noqa: E402
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy  # noqa: E402
-from rclpy.signals import SignalHandlerOptions  # noqa: E402
 
 from nav_sim.core.kinematics import twist_to_wheels  # noqa: E402
 from nav_sim.core.sim import NavSim  # noqa: E402
 from nav_sim.ros import qos  # noqa: E402
+from nav_sim.ros.bare import own_node, subscription_wait_set, take, wait_ready  # noqa: E402
 from nav_sim.ros.client import SimClient  # noqa: E402
 from nav_sim.ros.process import SimProcess  # noqa: E402
 
@@ -93,32 +91,20 @@ def idle_cpu(seconds: float) -> float:
         return (cpu_seconds(sim.process.pid) - before) / (time.monotonic() - start)
 
 
-def _bare_node(name: str, namespace: str) -> tuple[rclpy.Context, rclpy.node.Node]:
-    context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-    return context, rclpy.create_node(name, namespace=namespace, context=context,
-                                      start_parameter_services=False, enable_rosout=False)
-
-
-def _take(context: rclpy.Context, subscription: object, timeout_s: float) -> Twist | None:
+def _next(wait_set: object, subscription: object, timeout_s: float) -> Twist | None:
     """Wait on ``subscription`` alone, as the lockstep hot paths do; its message or None."""
-    wait_set = _rclpy.WaitSet(1, 0, 0, 0, 0, 0, context.handle)
-    wait_set.add_subscription(subscription.handle)
-    wait_set.wait(int(timeout_s * 1e9))
-    if subscription.handle.pointer in wait_set.get_ready_entities('subscription'):
-        taken = subscription.handle.take_message(Twist, subscription.raw)
-        return taken[0] if taken is not None else None
-    return None
+    return take(subscription) if wait_ready(wait_set, [subscription], timeout_s) else None
 
 
 def echo(namespace: str) -> None:
     """Send every ``ping`` back on ``pong`` (the floor's child); end on a negative ``linear.x``."""
-    context, node = _bare_node('bench_echo', namespace)
+    context, node = own_node('bench_echo', namespace)
     pong = node.create_publisher(Twist, 'pong', qos.OBSERVATION)
     ping = node.create_subscription(Twist, 'ping', lambda _: None, qos.CONTROL)
+    waits = subscription_wait_set(context, 1)
     deadline = time.monotonic() + 300.0
     while time.monotonic() < deadline:
-        message = _take(context, ping, 0.2)
+        message = _next(waits, ping, 0.2)
         if message is not None:
             pong.publish(message)
             if message.linear.x < 0:
@@ -129,9 +115,10 @@ def echo(namespace: str) -> None:
 def dds_floor(trips: int) -> float:
     """Median seconds of a bare ``Twist`` round trip to a child process and back."""
     namespace = f'/bench_floor_{os.getpid()}'
-    context, node = _bare_node('bench_floor', namespace)
+    context, node = own_node('bench_floor', namespace)
     ping = node.create_publisher(Twist, 'ping', qos.CONTROL)
     pong = node.create_subscription(Twist, 'pong', lambda _: None, qos.OBSERVATION)
+    waits = subscription_wait_set(context, 1)
     child = subprocess.Popen([sys.executable, __file__, '--echo', namespace])
     try:
         deadline = time.monotonic() + 30.0
@@ -146,7 +133,7 @@ def dds_floor(trips: int) -> float:
             message.angular.z = float(i)
             start = time.perf_counter()
             ping.publish(message)
-            while (answer := _take(context, pong, 5.0)) is None or answer.angular.z != i:
+            while (answer := _next(waits, pong, 5.0)) is None or answer.angular.z != i:
                 if answer is None and i >= 100:
                     raise SystemExit('bench_sim: no echo within 5 s')
                 if answer is None:  # the echo's writer may not have matched us yet

@@ -5,16 +5,15 @@ from __future__ import annotations
 import time
 from typing import Any
 
-import rclpy
 from geometry_msgs.msg import Twist
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image, JointState
 
 from helpers import wait_until
 from nav_sim import interface
 from nav_sim.ros import qos
+from nav_sim.ros.bare import own_node
 
 DEEP = QoSProfile(depth=100, reliability=qos.DECISIONS.reliability)
 
@@ -28,9 +27,7 @@ class Graph:
 
     def __init__(self, namespace: str, image_topic: str = interface.IMAGE_TOPIC,
                  cmd_vel_type: type = Twist) -> None:
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node('policy_test', namespace=namespace, context=self.context)
+        self.context, self.node = own_node('policy_test', namespace)
         self.camera = self.node.create_publisher(Image, image_topic, qos.OBSERVATION)
         self.twists: list[Any] = []
         self.received: list[float] = []

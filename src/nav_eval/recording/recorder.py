@@ -48,7 +48,6 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile
-from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
 from rosbags.interfaces import (
     Connection,
@@ -69,6 +68,7 @@ from nav_eval.recording.bags import (
 from nav_eval.recording.timestamps import Placed, StampPolicy
 from nav_eval.recording.topics import TOPICS, RecordedTopic, bag_qos, with_cmd_vel
 from nav_sim import interface
+from nav_sim.ros.bare import own_node
 
 _log = logging.getLogger(__name__)
 
@@ -148,11 +148,8 @@ class BagRecorder:
 
     # --- set-up ---------------------------------------------------------------------------
     def _start_node(self, node_name: str, queue_depth: int) -> None:
-        self._context = rclpy.Context()
-        rclpy.init(context=self._context, signal_handler_options=SignalHandlerOptions.NO)
-        node = self._node = rclpy.create_node(node_name, namespace=self.namespace or '/',
-                                              context=self._context,
-                                              start_parameter_services=False, enable_rosout=False)
+        self._context, node = own_node(node_name, self.namespace)
+        self._node = node
         for topic in self.topics:
             name = ('/' + topic.name.lstrip('/') if self.root_names
                     else node.resolve_topic_name(topic.name))

@@ -15,13 +15,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from rcl_interfaces.srv import SetParameters
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
@@ -30,14 +27,13 @@ from nav_sim.core.events import EVENT_NONE
 from nav_sim.errors import FrameSyncError, ScenarioError, SimConflictError, SimUnavailableError
 from nav_sim.ros import messages as ros_msgs
 from nav_sim.ros import qos, sim_graph
+from nav_sim.ros.bare import own_node, subscription_wait_set, take, wait_ready
 from nav_sim.ros.claim import Claim
 
 POLL_S = 0.25
 RESET_RETRY_S = 1.0
 RESEND_S = 2.0  # a service request with no answer by then is sent again (see _call)
 NAMES_WAIT_S = 3.0  # for the names of conflicting sims still being discovered
-#: how pybind11 reports an exception raised while it converted a call's arguments
-PYBIND11_CONVERSION_ERROR = 'Unable to convert call argument'
 
 
 @dataclass(frozen=True)
@@ -70,14 +66,8 @@ class SimClient:
         self.cmd_vel_stamped = cmd_vel_stamped
         self.namespace = namespace.rstrip('/')
         self.timeout = timeout
-        self.context = rclpy.Context()
-        # A library must not take over Ctrl-C: the application decides (training saves a
-        # checkpoint on KeyboardInterrupt), so this context installs no signal handlers.
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
-        # no parameter services or rosout: fewer entities in every wait of the hot path
-        self.node = rclpy.create_node(node_name, namespace=self.namespace or '/',
-                                      context=self.context, start_parameter_services=False,
-                                      enable_rosout=False)
+        # its own context without signal handlers (the application owns Ctrl-C), a bare node
+        self.context, self.node = own_node(node_name, self.namespace)
         self._partial: dict[int, dict[str, Any]] = {}
         self._latest: Frame | None = None
         self.goal: tuple[float, float] | None = None
@@ -91,7 +81,7 @@ class SimClient:
         # The lockstep hot path waits on these two subscriptions directly, as
         # rclpy.wait_for_message does: the executor's per-wait bookkeeping costs more than the
         # sim's whole control period.  Services and the latched goal go through the executor.
-        self._wait_set = _rclpy.WaitSet(len(self._subs), 0, 0, 0, 0, 0, self.context.handle)
+        self._wait_set = subscription_wait_set(self.context, len(self._subs))
         n.create_subscription(PoseStamped, interface.GOAL_TOPIC, self._on_goal, qos.LATCHED)
         self.pub_cmd = n.create_publisher(ros_msgs.cmd_vel_class(cmd_vel_stamped),
                                           interface.CMD_VEL_TOPIC, qos.CONTROL)
@@ -190,17 +180,10 @@ class SimClient:
 
     def _take_observations(self, timeout: float) -> None:
         """Wait up to ``timeout`` s on the observation subscriptions and take what arrived."""
-        ws = self._wait_set
-        ws.clear_entities()
-        for sub in self._subs:
-            ws.add_subscription(sub.handle)
-        ws.wait(int(timeout * 1e9))
-        ready = ws.get_ready_entities('subscription')
-        for sub in self._subs:
-            if sub.handle.pointer in ready:
-                taken = _take(sub)
-                if taken is not None:
-                    sub.callback(taken[0])
+        for sub in wait_ready(self._wait_set, self._subs, timeout):
+            message = take(sub)
+            if message is not None:
+                sub.callback(message)
 
     def _wait_frame(self, predicate: Callable[[Frame], bool], what: str,
                     limit: float | None = None) -> Frame | None:
@@ -382,19 +365,3 @@ def _frame(stamp: int, parts: dict[str, Any]) -> Frame:
     pose = (event.get('x', math.nan), event.get('y', math.nan), event.get('yaw', math.nan))
     twist = (event.get('linear', math.nan), event.get('angular', math.nan))
     return Frame(stamp, parts['image'], event, pose, twist)
-
-
-def _take(sub: Any) -> Any:
-    """Take one message from a ready subscription (rclpy's ``take_message``).
-
-    A Ctrl-C (or a SIGTERM turned into KeyboardInterrupt) whose Python handler runs while
-    pybind11 converts the call's arguments surfaces as ``RuntimeError: Unable to convert call
-    argument ...`` instead of the KeyboardInterrupt: raise that, so that an interrupted run
-    saves its checkpoint instead of failing.
-    """
-    try:
-        return sub.handle.take_message(sub.msg_type, sub.raw)
-    except RuntimeError as exc:
-        if str(exc).startswith(PYBIND11_CONVERSION_ERROR):
-            raise KeyboardInterrupt from exc
-        raise

@@ -19,6 +19,8 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerGuardCondition
 from rclpy.subscription import Subscription
 
+from nav_sim.ros.bare import take
+
 
 class NodeWaitSet:
     """Every entity of one node (and some extra guard conditions) in a bare rcl wait set.
@@ -108,10 +110,9 @@ def spin_lockstep(node: Node, executor: Executor, subscription: Subscription,
         while context.ok():
             mine, other = waits.wait(subscription)
             if mine:
-                taken = subscription.handle.take_message(subscription.msg_type,
-                                                         subscription.raw)
-                if taken is not None:
-                    handle(taken[0])
+                message = take(subscription)
+                if message is not None:
+                    handle(message)
             if other and context.ok():
                 executor.spin_once(timeout_sec=0.0)
     finally:

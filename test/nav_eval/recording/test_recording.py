@@ -13,12 +13,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import rclpy
 import yaml
 from builtin_interfaces.msg import Time
 from geometry_msgs.msg import Twist, Vector3
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from rclpy.signals import SignalHandlerOptions
 from rosbags.typesys import Stores, get_typestore
 from rosgraph_msgs.msg import Clock
 
@@ -38,6 +36,7 @@ from nav_eval.recording.session import format_counts
 from nav_eval.recording.topics import bag_qos
 from nav_gym.cli import strip_ros_args
 from nav_sim.ros import qos
+from nav_sim.ros.bare import own_node
 from nav_sim.ros.client import SimClient
 from nav_sim.ros.process import SimProcess
 
@@ -304,10 +303,8 @@ def test_command_line_helpers():
 
 def test_unstamped_messages_wait_for_the_first_sim_stamp(tmp_path, namespace):
     bag = tmp_path / 'held_bag'
-    context = rclpy.Context()
-    rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
+    context, node = own_node('fake_sim', namespace)
     try:
-        node = rclpy.create_node('fake_sim', namespace=namespace, context=context)
         profile = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         pub_cmd = node.create_publisher(Twist, 'cmd_vel', profile)
         pub_clock = node.create_publisher(Clock, '/clock', profile)

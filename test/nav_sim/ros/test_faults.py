@@ -190,7 +190,7 @@ def test_ctrl_c_during_a_take_is_an_interrupt_not_a_runtime_error():
     # instead of saving its checkpoint (exit 130)
     from types import SimpleNamespace
 
-    from nav_sim.ros.client import _take
+    from nav_sim.ros.bare import take
 
     def interrupted(msg_type, raw):
         raise RuntimeError("Unable to convert call argument '0' to Python object")
@@ -199,10 +199,10 @@ def test_ctrl_c_during_a_take_is_an_interrupt_not_a_runtime_error():
         raise RuntimeError('something else')
 
     with pytest.raises(KeyboardInterrupt):
-        _take(SimpleNamespace(handle=SimpleNamespace(take_message=interrupted),
+        take(SimpleNamespace(handle=SimpleNamespace(take_message=interrupted),
                               msg_type=object, raw=False))
     with pytest.raises(RuntimeError, match='something else'):
-        _take(SimpleNamespace(handle=SimpleNamespace(take_message=broken), msg_type=object,
+        take(SimpleNamespace(handle=SimpleNamespace(take_message=broken), msg_type=object,
                               raw=False))
 
 

@@ -9,9 +9,7 @@ import sys
 import time
 from pathlib import Path
 
-import rclpy
 from rclpy.executors import SingleThreadedExecutor
-from rclpy.signals import SignalHandlerOptions
 from sensor_msgs.msg import Image
 from std_srvs.srv import Trigger
 
@@ -19,6 +17,7 @@ from helpers import interrupt, wait_until
 from nav_sim import interface
 from nav_sim.errors import SimInUseError
 from nav_sim.ros import qos
+from nav_sim.ros.bare import own_node
 from nav_sim.ros.client import SimClient
 from nav_sim.ros.process import SimProcess
 
@@ -76,9 +75,7 @@ class Observer:
     """A plain rclpy subscriber of the sim's camera."""
 
     def __init__(self, namespace: str) -> None:
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context, signal_handler_options=SignalHandlerOptions.NO)
-        self.node = rclpy.create_node('observer', namespace=namespace, context=self.context)
+        self.context, self.node = own_node('observer', namespace)
         self.images = 0
         self.node.create_subscription(Image, interface.IMAGE_TOPIC, self._on_image,
                                       qos.OBSERVATION)
@@ -153,9 +150,7 @@ def test_clients_of_one_process_share_the_claim(namespace):
 
 def test_every_reset_of_a_burst_is_answered(namespace):
     with SimProcess(namespace, {}):
-        context = rclpy.Context()
-        rclpy.init(context=context, signal_handler_options=SignalHandlerOptions.NO)
-        node = rclpy.create_node('burst', namespace=namespace, context=context)
+        context, node = own_node('burst', namespace)
         try:
             # a foreign client with a deep response queue: what it sends, the sim answers
             client = node.create_client(Trigger, interface.RESET_SERVICE,
