@@ -39,6 +39,7 @@ from nav_gym.training.run_dir import (
     SUMMARY,
     checkpoints,
     curve_dir,
+    scheduled_checkpoints,
 )
 from nav_sim.core.config import SPLITS
 from nav_sim.ros.process import child_preexec
@@ -117,8 +118,8 @@ def has_sets(results: Path, names: list[str], seeds: dict[str, list[int]]) -> bo
 def missing_evaluations(trial: dict[str, Any]) -> list[tuple[str, str | None, Path]]:
     """Return the evaluations still to run as (set names, checkpoint, output folder).
 
-    The final model on the training and held-out seeds, then every checkpoint after step 0 on
-    the curve seeds (the sample-efficiency curve).
+    The final model on the training and held-out seeds, then every scheduled checkpoint (not
+    step 0, nor one a stop saved between two) on the curve seeds (the sample-efficiency curve).
     """
     run_dir = Path(trial['run_dir'])
     todo: list[tuple[str, str | None, Path]] = []
@@ -126,10 +127,10 @@ def missing_evaluations(trial: dict[str, Any]) -> list[tuple[str, str | None, Pa
     if not has_sets(run_dir / EVAL / RESULTS, list(final), final):
         todo.append(('dqn_train,dqn_heldout', None, run_dir / EVAL))
     if trial['curve_seeds']:
-        for steps, path in checkpoints(run_dir):
+        for steps, path in scheduled_checkpoints(run_dir):
             out = curve_dir(run_dir, steps)
-            if steps > 0 and not has_sets(out / RESULTS, ['early_heldout'],
-                                          {'early_heldout': trial['curve_seeds']}):
+            if not has_sets(out / RESULTS, ['early_heldout'],
+                            {'early_heldout': trial['curve_seeds']}):
                 todo.append(('early_heldout', str(path.relative_to(run_dir)), out))
     return todo
 

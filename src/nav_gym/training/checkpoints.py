@@ -17,6 +17,7 @@ from nav_gym.training.run_dir import (
     REPLAY_BUFFER_STEP,
     checkpoint_path,
     checkpoints,
+    on_schedule,
 )
 from nav_gym.training.spec import LearnerSpec
 
@@ -99,9 +100,8 @@ def make_callback(config: TrainConfig, run_dir: Path) -> Any:
         """CheckpointCallback with atomic writes and the latest replay buffer."""
 
         def _on_step(self) -> bool:
-            # N envs add N steps per call: save when a multiple of checkpoint_freq is passed
-            steps, added = self.num_timesteps, self.training_env.num_envs
-            if steps // config.checkpoint_freq > (steps - added) // config.checkpoint_freq:
+            if on_schedule(self.num_timesteps, self.training_env.num_envs,
+                           config.checkpoint_freq):
                 path = save_checkpoint(self.model, run_dir, config.save_replay_buffer)
                 print(f'checkpoint: {path}', flush=True)
             return True

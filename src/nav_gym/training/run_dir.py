@@ -121,6 +121,26 @@ def checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
     return sorted(found)
 
 
+def on_schedule(steps: int, added: int, every: int) -> bool:
+    """Say whether a call that added ``added`` steps and reached ``steps`` passed a checkpoint.
+
+    The schedule is every ``every`` steps; N envs add N steps a call, so a multiple of
+    ``every`` is passed, not always met.
+    """
+    return steps // every > (steps - added) // every
+
+
+def scheduled_checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
+    """Return the run's checkpoints on its schedule (every ``checkpoint_freq``), oldest first.
+
+    These are the sample-efficiency curve's points: not step 0's reference, nor a checkpoint
+    that a stop saved between two.
+    """
+    config = load_config(run_dir)
+    return [(steps, path) for steps, path in checkpoints(run_dir)
+            if steps > 0 and on_schedule(steps, config.n_envs, config.checkpoint_freq)]
+
+
 def parse_checkpoint_name(name: str) -> int | None:
     """Return the steps a checkpoint file name carries (None for another name)."""
     match = CHECKPOINT_RE.search(name)

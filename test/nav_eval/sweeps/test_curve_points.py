@@ -1,0 +1,33 @@
+"""The sample-efficiency curve takes the checkpoints of the schedule, not those a stop saved."""
+
+from __future__ import annotations
+
+import pytest
+
+from nav_eval.sweeps.trial import missing_evaluations
+from nav_gym.training.config import TrainConfig
+from nav_gym.training.run_dir import CONFIG, checkpoint_path, on_schedule
+
+
+@pytest.mark.parametrize('n_envs, saved, curve', [
+    (1, [0, 100, 164, 200], [100, 200]),     # 164: a Ctrl-C between two checkpoints
+    (3, [0, 102, 150, 201, 300], [102, 201, 300]),  # 3 envs pass 100 and 200, meet 300
+])
+def test_the_curve_takes_the_scheduled_checkpoints_not_a_stops(tmp_path, n_envs, saved, curve):
+    run = tmp_path / 'seed1'
+    (run / 'checkpoints').mkdir(parents=True)
+    (run / CONFIG).write_text(TrainConfig(checkpoint_freq=100, n_envs=n_envs).to_yaml())
+    for steps in saved:
+        checkpoint_path(run, steps).touch()
+    trial = {'run_dir': str(run), 'train_seeds': [101], 'heldout_seeds': [201],
+             'curve_seeds': [201, 202]}
+    todo = missing_evaluations(trial)
+    assert todo[0][0] == 'dqn_train,dqn_heldout'  # the final model first
+    assert [(names, out.name) for names, _, out in todo[1:]] == [
+        ('early_heldout', str(steps)) for steps in curve]
+
+
+def test_the_schedule_is_the_one_the_saving_callback_keeps():
+    # every 100 steps: one env meets each multiple, three envs pass it
+    assert [s for s in range(1, 301) if on_schedule(s, 1, 100)] == [100, 200, 300]
+    assert [s for s in range(3, 301, 3) if on_schedule(s, 3, 100)] == [102, 201, 300]
