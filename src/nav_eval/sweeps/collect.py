@@ -25,6 +25,7 @@ from nav_gym.training.run_dir import (
     RESUME_COMMAND,
     SUMMARY,
     load_config,
+    on_schedule,
     read_traces,
 )
 from nav_sim.core.config import HELDOUT, TRAIN, SimConfig
@@ -60,6 +61,9 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
     final = {split: sets[name] for split, name in FINAL_SETS.items() if name in sets}
     curve, curve_values = {}, {}
     for path in sorted((run_dir / EVAL / CURVE).glob(f'*/{RESULTS}')):
+        name = path.parent.name
+        if not (name.isdigit() and on_schedule(int(name), config.n_envs, config.checkpoint_freq)):
+            continue  # a stop's checkpoint, evaluated by an older sweep: not a curve point
         data = read_json(path) or {}
         for s in data.get('sets', []):
             curve[int(path.parent.name)] = {'success_rate': s['summary']['success_rate'],

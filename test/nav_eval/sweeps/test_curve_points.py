@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from nav_eval.sweeps.trial import missing_evaluations
@@ -31,3 +33,18 @@ def test_the_schedule_is_the_one_the_saving_callback_keeps():
     # every 100 steps: one env meets each multiple, three envs pass it
     assert [s for s in range(1, 301) if on_schedule(s, 1, 100)] == [100, 200, 300]
     assert [s for s in range(3, 301, 3) if on_schedule(s, 3, 100)] == [102, 201, 300]
+
+
+def test_a_sweeps_report_leaves_out_a_stops_curve_point_that_an_older_sweep_evaluated(tmp_path):
+    from nav_eval.sweeps.collect import read_trial
+    run = tmp_path / 'seed1'
+    run.mkdir()
+    (run / CONFIG).write_text(TrainConfig(checkpoint_freq=100).to_yaml())
+    for steps, rate in ((100, 0.5), (164, 0.9), (200, 0.75)):
+        out = run / 'eval' / 'curve' / str(steps)
+        out.mkdir(parents=True)
+        (out / 'results.json').write_text(json.dumps({'sets': [
+            {'name': 'early_heldout', 'seeds': [201, 202], 'summary': {'success_rate': rate}}]}))
+    curve = read_trial(run)['curve']
+    assert {steps: point['success_rate'] for steps, point in curve.items()} == {100: 0.5,
+                                                                                 200: 0.75}
