@@ -8,7 +8,7 @@ from pathlib import Path
 from nav_eval.errors import EvaluationError
 from nav_gym.errors import TrainConfigError
 from nav_gym.training.config import TrainConfig
-from nav_gym.training.run_dir import FINAL_MODEL, load_config, scheduled_checkpoints
+from nav_gym.training.run_dir import FINAL_MODEL, checkpoints, load_config
 from nav_sim.core.config import TRAIN, normalise_split
 
 SET_LABELS = {
@@ -48,8 +48,8 @@ def run_config(run_dir: Path) -> TrainConfig:
 
 
 def early_checkpoint(run_dir: Path) -> str | None:
-    """Return the first scheduled checkpoint after step 0 (relative to the run directory)."""
-    found = scheduled_checkpoints(run_dir)
+    """Return the first checkpoint after step 0 (relative to the run directory), if any."""
+    found = [(s, p) for s, p in checkpoints(run_dir) if s > 0]
     return str(found[0][1].relative_to(run_dir)) if found else None
 
 

@@ -24,8 +24,8 @@ from nav_gym.training.run_dir import (
     RESULTS,
     RESUME_COMMAND,
     SUMMARY,
+    is_curve_point,
     load_config,
-    on_schedule,
     read_traces,
 )
 from nav_sim.core.config import HELDOUT, TRAIN, SimConfig
@@ -62,7 +62,7 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
     curve, curve_values = {}, {}
     for path in sorted((run_dir / EVAL / CURVE).glob(f'*/{RESULTS}')):
         name = path.parent.name
-        if not (name.isdigit() and on_schedule(int(name), config.n_envs, config.checkpoint_freq)):
+        if not (name.isdigit() and is_curve_point(int(name), config)):
             continue  # a stop's checkpoint, evaluated by an older sweep: not a curve point
         data = read_json(path) or {}
         for s in data.get('sets', []):

@@ -38,8 +38,8 @@ from nav_gym.training.run_dir import (
     RESULTS,
     SUMMARY,
     checkpoints,
+    curve_checkpoints,
     curve_dir,
-    scheduled_checkpoints,
 )
 from nav_sim.core.config import SPLITS
 from nav_sim.ros.process import child_preexec
@@ -118,8 +118,8 @@ def has_sets(results: Path, names: list[str], seeds: dict[str, list[int]]) -> bo
 def missing_evaluations(trial: dict[str, Any]) -> list[tuple[str, str | None, Path]]:
     """Return the evaluations still to run as (set names, checkpoint, output folder).
 
-    The final model on the training and held-out seeds, then every scheduled checkpoint (not
-    step 0, nor one a stop saved between two) on the curve seeds (the sample-efficiency curve).
+    The final model on the training and held-out seeds, then every curve point on the curve
+    seeds (the sample-efficiency curve; :func:`nav_gym.training.run_dir.is_curve_point`).
     """
     run_dir = Path(trial['run_dir'])
     todo: list[tuple[str, str | None, Path]] = []
@@ -127,7 +127,7 @@ def missing_evaluations(trial: dict[str, Any]) -> list[tuple[str, str | None, Pa
     if not has_sets(run_dir / EVAL / RESULTS, list(final), final):
         todo.append(('dqn_train,dqn_heldout', None, run_dir / EVAL))
     if trial['curve_seeds']:
-        for steps, path in scheduled_checkpoints(run_dir):
+        for steps, path in curve_checkpoints(run_dir):
             out = curve_dir(run_dir, steps)
             if not has_sets(out / RESULTS, ['early_heldout'],
                             {'early_heldout': trial['curve_seeds']}):

@@ -130,15 +130,22 @@ def on_schedule(steps: int, added: int, every: int) -> bool:
     return steps // every > (steps - added) // every
 
 
-def scheduled_checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
-    """Return the run's checkpoints on its schedule (every ``checkpoint_freq``), oldest first.
+def is_curve_point(steps: int, config: TrainConfig) -> bool:
+    """Say whether a run's checkpoint at ``steps`` is a point of its sample-efficiency curve.
 
-    These are the sample-efficiency curve's points: not step 0's reference, nor a checkpoint
-    that a stop saved between two.
+    The points are the checkpoints of the schedule (every ``checkpoint_freq`` steps) and the
+    finished run's last one (at its total steps, on the schedule or not); not step 0's
+    reference, nor a checkpoint that a stop saved between two (that one is for resuming).
     """
+    return steps > 0 and (on_schedule(steps, config.n_envs, config.checkpoint_freq)
+                          or steps >= config.total_timesteps)
+
+
+def curve_checkpoints(run_dir: Path) -> list[tuple[int, Path]]:
+    """Return the run's checkpoints that are curve points (:func:`is_curve_point`), in order."""
     config = load_config(run_dir)
     return [(steps, path) for steps, path in checkpoints(run_dir)
-            if steps > 0 and on_schedule(steps, config.n_envs, config.checkpoint_freq)]
+            if is_curve_point(steps, config)]
 
 
 def parse_checkpoint_name(name: str) -> int | None:

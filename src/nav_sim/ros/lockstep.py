@@ -19,8 +19,6 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerGuardCondition
 from rclpy.subscription import Subscription
 
-from nav_sim.ros.bare import take
-
 
 class NodeWaitSet:
     """Every entity of one node (and some extra guard conditions) in a bare rcl wait set.
@@ -109,10 +107,11 @@ def spin_lockstep(node: Node, executor: Executor, subscription: Subscription,
     try:
         while context.ok():
             mine, other = waits.wait(subscription)
-            if mine:
-                message = take(subscription)
-                if message is not None:
-                    handle(message)
+            if mine:  # rclpy's own handlers take Ctrl-C here: no KeyboardInterrupt (bare.take)
+                taken = subscription.handle.take_message(subscription.msg_type,
+                                                         subscription.raw)
+                if taken is not None:
+                    handle(taken[0])
             if other and context.ok():
                 executor.spin_once(timeout_sec=0.0)
     finally:

@@ -11,14 +11,17 @@ from nav_gym.training.config import TrainConfig
 from nav_gym.training.run_dir import CONFIG, checkpoint_path, on_schedule
 
 
-@pytest.mark.parametrize('n_envs, saved, curve', [
-    (1, [0, 100, 164, 200], [100, 200]),     # 164: a Ctrl-C between two checkpoints
-    (3, [0, 102, 150, 201, 300], [102, 201, 300]),  # 3 envs pass 100 and 200, meet 300
+@pytest.mark.parametrize('n_envs, total, saved, curve', [
+    (1, 250, [0, 100, 164, 200, 250], [100, 200, 250]),  # 164: a Ctrl-C; 250: the end
+    (3, 300, [0, 102, 150, 201, 300], [102, 201, 300]),  # 3 envs pass 100 and 200, meet 300
+    (1, 60, [0, 60], [60]),  # a run shorter than the schedule: its end alone
 ])
-def test_the_curve_takes_the_scheduled_checkpoints_not_a_stops(tmp_path, n_envs, saved, curve):
+def test_the_curve_takes_the_scheduled_checkpoints_and_the_end_not_a_stops(tmp_path, n_envs,
+                                                                          total, saved, curve):
     run = tmp_path / 'seed1'
     (run / 'checkpoints').mkdir(parents=True)
-    (run / CONFIG).write_text(TrainConfig(checkpoint_freq=100, n_envs=n_envs).to_yaml())
+    (run / CONFIG).write_text(TrainConfig(checkpoint_freq=100, n_envs=n_envs,
+                                          total_timesteps=total).to_yaml())
     for steps in saved:
         checkpoint_path(run, steps).touch()
     trial = {'run_dir': str(run), 'train_seeds': [101], 'heldout_seeds': [201],
