@@ -16,6 +16,7 @@ import pytest
 
 from helpers import REPO, make_tiny_run
 from nav_eval import seeds
+from nav_eval.analysis.anatomy import goal_in_view
 from nav_eval.errors import EvaluationError
 from nav_eval.evaluation import runner
 from nav_eval.evaluation.sets import DEFAULT_SETS, plan_sets, run_config
@@ -123,6 +124,9 @@ def test_results_files_and_metrics(run_dir, evaluated):
             with np.load(out / 'traces' / entry['name'] /
                          f"seed_{episode['seed']}_frames.npz") as data:
                 assert data['obs'].shape == (episode['length'] + 1, 3, 84, 84)
+                # what each decision saw, for the failure anatomy without the frames
+                assert [s['goal_in_view'] for s in trace['steps']] == [
+                    goal_in_view(obs) for obs in data['obs'][:-1]]
             has_q = entry['policy'] in ('dqn', 'explore')
             assert all((s['q_values'] is not None) == has_q for s in trace['steps'])
             if entry['policy'] == 'dqn':  # deterministic predict = argmax of the logged Q-values

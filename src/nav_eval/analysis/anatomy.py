@@ -12,7 +12,9 @@ than the diagnosis needs to place a bearing, so that a sliver at the image edge 
 as found.
 
 Reads the traces ``nav-eval-evaluate`` writes: ``RUN/eval/traces/<set>/seed_<n>.json`` (the
-actions) and ``seed_<n>_frames.npz`` (the observation before each decision, then the last).
+actions and, per decision, ``goal_in_view``: whether the goal was in view in what it saw).
+A trace written before that field existed needs ``seed_<n>_frames.npz`` beside it (the
+observation before each decision, then the last), from which it is computed the same way.
 """
 
 from __future__ import annotations
@@ -60,17 +62,33 @@ def in_view(frames: np.ndarray) -> np.ndarray:
     return mask.reshape(len(frames), -1).sum(axis=1) >= MIN_PIXELS
 
 
-def episode_anatomy(trace: dict[str, Any], frames: np.ndarray) -> EpisodeAnatomy:
+def goal_in_view(obs: np.ndarray) -> bool:
+    """Tell whether the goal is in view in one ``(3, H, W)`` observation (a trace's field)."""
+    return bool(in_view(obs[None])[0])
+
+
+def traced_in_view(trace: dict[str, Any]) -> bool:
+    """Tell whether every decision of a trace says whether the goal was in view."""
+    return all('goal_in_view' in step for step in trace['steps'])
+
+
+def episode_anatomy(trace: dict[str, Any], frames: np.ndarray | None = None) -> EpisodeAnatomy:
     """Describe one traced episode (``frames[i]`` is what decision ``i`` saw).
 
+    A trace whose decisions say whether the goal was in view needs no frames.  Otherwise
     ``frames`` holds one observation per decision and the last one after it; a trace and
-    frames that disagree raise ValueError.
+    frames that disagree, or neither, raise ValueError.
     """
     actions = [int(s['action']) for s in trace['steps']]
-    if len(frames) != len(actions) + 1:
+    if traced_in_view(trace):
+        seen = np.array([bool(s['goal_in_view']) for s in trace['steps']], dtype=bool)
+    elif frames is None:
+        raise ValueError(f"seed {trace.get('seed')}: neither goal_in_view nor frames")
+    elif len(frames) != len(actions) + 1:
         raise ValueError(f"seed {trace.get('seed')}: {len(frames)} observations for "
                          f'{len(actions)} decisions (expected one more)')
-    seen = in_view(frames[:len(actions)])
+    else:
+        seen = in_view(frames[:len(actions)])
     first = int(np.argmax(seen)) if seen.any() else None
     return EpisodeAnatomy(
         seed=int(trace['seed']), outcome=trace['outcome'], decisions=len(actions),
@@ -111,17 +129,19 @@ def traces_anatomy(traces: Iterable[tuple[Path, dict[str, Any]]],
 
     The pairs are what :func:`nav_gym.training.run_dir.read_traces` yields.
 
-    The frames are read beside each trace; an episode whose frames are missing or unreadable,
-    or disagree with its trace, is left out.  With the evaluation's ``arena`` and the camera's
-    horizontal half field of view ``half_fov`` (rad), a collision also says where the robot
-    touched and whether that was out of view (:func:`hit_bearing`).
+    A trace without ``goal_in_view`` reads its frames beside it; such an episode whose frames
+    are missing or unreadable, or disagree with its trace, is left out.  With the evaluation's
+    ``arena`` and the camera's horizontal half field of view ``half_fov`` (rad), a collision
+    also says where the robot touched and whether that was out of view (:func:`hit_bearing`).
     """
     out = []
     for path, trace in traces:
         try:
-            with np.load(frames_path(path)) as data:
-                frames = data['obs']
-            episode = episode_anatomy(trace, frames)
+            if traced_in_view(trace):
+                episode = episode_anatomy(trace)
+            else:
+                with np.load(frames_path(path)) as data:
+                    episode = episode_anatomy(trace, data['obs'])
             bearing = hit_bearing(trace, arena) if arena else None
         except (OSError, ValueError, KeyError, TypeError):
             continue

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from nav_eval.analysis import metrics
+from nav_eval.analysis.anatomy import goal_in_view
 from nav_eval.errors import EvaluationError
 from nav_eval.evaluation.policies import DQNPolicy, ExploringDQNPolicy, RandomPolicy
 from nav_eval.evaluation.sets import EvalSet, run_config
@@ -62,6 +63,7 @@ def run_episode(env: NavigationEnv, policy: Actor, seed: int, split: str,
     total, truncated, event = 0.0, False, EVENT_NONE
     step_info: dict[str, Any] = {'distance': info['distance'], 'path_length': 0.0}
     while True:
+        seen = goal_in_view(obs)  # what this decision saw, for the failure anatomy
         action, q_values = policy.act(obs)
         env.note_q_values(q_values)  # for the live view and the bag's /visnav/step
         obs, reward, terminated, truncated, step_info = env.step(action)
@@ -78,7 +80,7 @@ def run_episode(env: NavigationEnv, policy: Actor, seed: int, split: str,
                                        step_info['reward_terms'].items()},
                       'distance': round(step_info['distance'], 6),
                       'pose': [round(v, 6) for v in step_info['pose']], 'event': event,
-                      'q_values': q_values})
+                      'q_values': q_values, 'goal_in_view': seen})
         if terminated or truncated:
             break
     result = metrics.episode_result(

@@ -134,8 +134,8 @@ def _banks_markdown(data: dict[str, Any]) -> list[str]:
 def _anatomy_markdown(rows: list[dict[str, Any]]) -> list[str]:
     lines = [f'## {ANATOMY}', '']
     if not rows:
-        return lines + ['No held-out traces were kept with their frames (`eval/traces/dqn_heldout/'
-                        'seed_N.json` beside `seed_N_frames.npz`).', '']
+        return lines + ['No held-out traces were kept (`eval/traces/dqn_heldout/seed_N.json`; a '
+                        'trace without `goal_in_view` also needs its `seed_N_frames.npz`).', '']
     lines += ['How the held-out episodes spent their decisions, by outcome: *finding* the goal '
               '(decisions before it was first in view; episodes that never saw it) and '
               '*reaching* it (the share of decisions taken with the goal in view, how many of '

@@ -73,6 +73,27 @@ def test_a_set_is_read_from_its_traces(tmp_path):
     assert anatomy.traces_anatomy(read_traces(tmp_path, 'dqn_train')) == []
 
 
+def test_a_trace_that_says_what_each_decision_saw_needs_no_frames(tmp_path):
+    actions = [L, R, L, R, F, R, F, F]
+    seen = [False, False, False, True, True, True, False, True, True]
+    frames = frames_with_goal(seen)
+    flagged = trace(7, 'timeout', actions)
+    for step, frame in zip(flagged['steps'], frames, strict=False):
+        step['goal_in_view'] = anatomy.goal_in_view(frame)  # as evaluation writes it
+    assert [s['goal_in_view'] for s in flagged['steps']] == seen[:-1]
+    assert anatomy.episode_anatomy(flagged) == anatomy.episode_anatomy(
+        trace(7, 'timeout', actions), frames)
+    path = trace_path(tmp_path, 'dqn_heldout', 7)  # a set without frames (a device screen's)
+    path.parent.mkdir(parents=True)
+    path.write_text(json.dumps(flagged))
+    assert [(e.seed, e.in_view, e.first_in_view) for e in anatomy.traces_anatomy(
+        read_traces(tmp_path, 'dqn_heldout'))] == [(7, 4, 3)]
+    path.write_text(json.dumps(trace(7, 'timeout', actions)))  # an older trace needs them
+    assert anatomy.traces_anatomy(read_traces(tmp_path, 'dqn_heldout')) == []
+    with pytest.raises(ValueError, match='neither goal_in_view nor frames'):
+        anatomy.episode_anatomy(trace(7, 'timeout', actions))
+
+
 def test_frames_that_do_not_match_the_decisions_are_refused():
     with pytest.raises(ValueError, match='3 observations for 3 decisions'):
         anatomy.episode_anatomy(trace(5, 'timeout', [L, F, R]), frames_with_goal([True] * 3))
