@@ -62,13 +62,12 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
     curve, curve_values = {}, {}
     for path in sorted((run_dir / EVAL / CURVE).glob(f'*/{RESULTS}')):
         name = path.parent.name
-        if not (name.isdigit() and is_curve_point(int(name), config)):
+        if not (name.isdigit() and is_curve_point(steps := int(name), config)):
             continue  # a stop's checkpoint, evaluated by an older sweep: not a curve point
         data = read_json(path) or {}
         for s in data.get('sets', []):
-            curve[int(path.parent.name)] = {'success_rate': s['summary']['success_rate'],
-                                            'seeds': s['seeds']}
-            curve_values[int(path.parent.name)] = calibration.set_values(
+            curve[steps] = {'success_rate': s['summary']['success_rate'], 'seeds': s['seeds']}
+            curve_values[steps] = calibration.set_values(
                 path.parent, s['name'], config, s['seeds'])
     summary = read_json(run_dir / SUMMARY) or {}
     heldout = final.get(HELDOUT)
