@@ -46,7 +46,7 @@ bench: setup
 	$(PY) benchmarks/bench_envs.py
 
 lint: setup
-	$(VENV)/bin/ruff check src test benchmarks
+	$(VENV)/bin/ruff check src test benchmarks tools
 
 setup: system-deps $(STAMP)
 

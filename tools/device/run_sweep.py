@@ -1,0 +1,84 @@
+"""Run a sweep directory's training trials at once, one thread each, without Ray.
+
+    python tools/device/run_sweep.py runs/NAME [--stop-after SECONDS]
+
+For one machine that has no Ray (a lent accelerator machine): each trial is the sweep's own
+:func:`nav_eval.sweeps.trial.run_trial`, so its child, logs, checkpoints and evaluations are the
+ones a Ray sweep writes, and ``visnav-sweep --aggregate`` or ``--resume`` reads them.  Baseline
+trials are left out (make the sweep with ``--no-baselines``).  ``--stop-after``: SIGINT every
+trial's child after that many seconds, so that each saves a checkpoint before an outer limit
+kills it; a later ``--resume`` (here or under Ray) goes on from there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import signal
+import threading
+import time
+from pathlib import Path
+
+from nav_eval.sweeps.spec import load_spec
+from nav_eval.sweeps.trial import run_trial, trial_finished
+
+#: how long stopped trials get to save before the runner returns anyway
+GRACE_SECONDS = 40
+
+
+def main() -> int:
+    """Run the sweep's unfinished training trials; return 0 if all finished."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('sweep_dir', type=Path)
+    parser.add_argument('--stop-after', type=float, default=0)
+    args = parser.parse_args()
+    spec = load_spec(args.sweep_dir)
+    trials = [t for t in spec.trials() if t['kind'] == 'train' and not trial_finished(t)]
+    results: dict[str, object] = {}
+    start = time.monotonic()
+
+    def one(trial: dict) -> None:
+        try:
+            run_trial(trial, lambda figures: results.__setitem__(trial['name'], figures))
+        except Exception as exc:  # noqa: BLE001 - reported with the trial's name
+            results[trial['name']] = f'FAILED: {exc}'
+        print(f"{time.monotonic() - start:7.1f} s {trial['name']}: "
+              f"{json.dumps(results[trial['name']])}", flush=True)
+
+    threads = [threading.Thread(target=one, args=(t,), daemon=True) for t in trials]
+    print(f'{len(threads)} trials of {args.sweep_dir} at once', flush=True)
+    for thread in threads:
+        thread.start()
+    deadline = start + args.stop_after if args.stop_after else None
+    while any(t.is_alive() for t in threads):
+        if deadline and time.monotonic() > deadline:
+            print(f'{time.monotonic() - start:7.1f} s: stopping the trials (they save)',
+                  flush=True)
+            _interrupt_children()
+            for thread in threads:  # each saves a checkpoint, then its thread ends
+                thread.join(max(0.0, deadline + GRACE_SECONDS - time.monotonic()))
+            break
+        time.sleep(2)
+    failed = [name for name, r in results.items() if not isinstance(r, dict)]
+    print(f'{time.monotonic() - start:.1f} s: {len(results) - len(failed)} finished, '
+          f'{len(failed)} failed', flush=True)
+    return 1 if failed or len(results) < len(trials) else 0
+
+
+def _interrupt_children() -> None:
+    """SIGINT each trial's child (each runs in a session of its own)."""
+    me = os.getpid()
+    for proc in Path('/proc').iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            fields = (proc / 'stat').read_text().rsplit(')', 1)[1].split()
+        except OSError:
+            continue
+        if int(fields[1]) == me:  # ppid: a trial's child
+            os.kill(int(proc.name), signal.SIGINT)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# On the lent machine: install the carried wheels (.whl) in a venv beside the image's torch,
+# run the sweep runs/$1's training trials at once (run_sweep.py), stopping them at $2 seconds so
+# that they save, then pack runs/$1 (without models, replay buffers and frames) into $OUT.
+#   bash tools/device/screen.sh NAME STOP_SECONDS
+set -uo pipefail
+name=$1; stop=${2:-0}
+start=$SECONDS
+# EGL's loader (libglvnd), which the image lacks: `apt-get download libegl1 libglvnd0 ...` into .gl
+for f in .gl/*.deb; do [ -e "$f" ] && dpkg -x "$f" /; done; ldconfig
+vendor=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
+[ -e $vendor ] && export __EGL_VENDOR_LIBRARY_FILENAMES=$vendor
+base=$(python3 -c 'import sys; print(sys.prefix)')
+python3 -m venv --without-pip /tmp/venv || exit 1
+site=$(echo /tmp/venv/lib/python3.*/site-packages)
+# the image's packages (torch, numpy, ...) after the venv's own
+python3 -c 'import site; print("\n".join(site.getsitepackages()))' > "$site/image.pth"
+/tmp/venv/bin/python -m pip install -q --no-index --no-deps --no-compile \
+    .whl/*.whl || exit 1
+echo "# set-up: $((SECONDS - start)) s ($base)"
+export MUJOCO_GL=egl PYTHONUNBUFFERED=1
+nvidia-smi --query-gpu=name,memory.used --format=csv,noheader
+/tmp/venv/bin/python -c 'import rclpy, mujoco, torch, stable_baselines3, nav_gym.training.trainer; print("imports ok, cuda", torch.cuda.is_available())
+c = mujoco.GLContext(64, 64); c.make_current(); print("EGL ok")' || exit 1
+/tmp/venv/bin/python tools/device/run_sweep.py "runs/$name" --stop-after "$stop"
+code=$?
+echo "# trials: exit $code after $((SECONDS - start)) s"
+tar --exclude='*replay_buffer*' --exclude='*_frames.npz' --exclude='*.zip' -czf "$OUT/$name.tgz" \
+    -C runs "$name"
+ls -la "$OUT"
