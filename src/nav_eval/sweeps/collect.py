@@ -7,10 +7,13 @@ import math
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from nav_eval.analysis import anatomy, calibration
 from nav_eval.errors import SweepError
 from nav_eval.seeds import HELDOUT_BANK, TRAIN_BANK, seed_text
 from nav_eval.sweeps.spec import (
+    SWEEP_RESULTS,
     TRIALS,
     SweepSpec,
 )
@@ -32,10 +35,14 @@ from nav_sim.core.config import HELDOUT, TRAIN, SimConfig
 from nav_sim.errors import NavSimError
 
 FINAL_SETS = {TRAIN: 'dqn_train', HELDOUT: 'dqn_heldout'}
+#: a final evaluation's rates, per split (the per-seed rows of results.json)
+RATES = ('success_rate', 'collision_rate', 'timeout_rate', 'mean_spl')
 
 
+#: settings that say how a run is kept and where it runs, not what it learns: trials that differ
+#: only in these are one configuration (a checkpoint's save changes nothing the learner draws)
 BOOKKEEPING = ('seed', 'run_name', 'runs_dir', 'device', 'namespace', 'sim', 'sim_timeout',
-               'save_replay_buffer', 'keep_replay_buffer')
+               'save_replay_buffer', 'keep_replay_buffer', 'checkpoint_freq')
 
 
 def read_json(path: Path) -> Any:
@@ -51,6 +58,67 @@ def trial_dirs(folder: Path) -> list[Path]:
     root = folder / TRIALS if (folder / TRIALS).is_dir() else folder
     return sorted(p for p in root.iterdir() if (p / CONFIG).is_file()) \
         if root.is_dir() else []
+
+
+def exported_dirs(folder: Path) -> list[Path]:
+    """Return the sweep summaries (``visnav-sweep --export``) directly in ``folder``.
+
+    A summary is a folder with a results.json that has per-seed rows, and no run directory.
+    """
+    if not folder.is_dir():
+        return []
+    return sorted(p for p in folder.iterdir() if p.is_dir() and not (p / CONFIG).is_file()
+                  and 'per_seed' in (read_json(p / SWEEP_RESULTS) or {}))
+
+
+def read_exported(summary: Path) -> list[dict[str, Any]]:
+    """Return the trials of one sweep summary, from its per-seed rows.
+
+    A summary keeps each trial's final rates, not its episodes: such a trial (``exported``)
+    counts in the aggregates and the probability of improvement, and has no curve, anatomy,
+    calibration or pooled bank row.  Settings that the summary's code did not have yet are
+    today's defaults, as for an older run's config (``load_config``).  Its name is
+    ``<summary>:<trial>``.
+    """
+    data = read_json(summary / SWEEP_RESULTS) or {}
+    defaults = jsonable(_settings(TrainConfig().with_full_sim_params()))
+    trials = []
+    for row in data.get('per_seed', []):
+        kept = {k: v for k, v in data.get('settings', {}).get(row['config'], {}).items()
+                if k not in BOOKKEEPING}
+        settings = {**defaults, **kept, 'sim_params': {**defaults['sim_params'],
+                                                       **(kept.get('sim_params') or {})}}
+        final = {split: {'summary': {**{rate: row[f'{split}_{rate}'] for rate in RATES},
+                                     'episodes': row[f'{split}_episodes']}}
+                 for split in FINAL_SETS if f'{split}_success_rate' in row}
+        trials.append({'name': f"{summary.name}:{row['trial']}", 'run_dir': summary,
+                       'seed': row['seed'], 'settings': settings, 'final': final,
+                       'curve': {}, 'anatomy': [], 'values': [], 'curve_values': {},
+                       'finished': True, 'exported': True,
+                       'wall_clock_s': row.get('wall_clock_s'), 'steps': row.get('steps')})
+    return trials
+
+
+def jsonable(value: Any) -> Any:
+    """Return ``value`` as results.json writes it (lists, rounded floats, plain numbers)."""
+    if isinstance(value, dict):
+        return {str(k): jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [jsonable(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return jsonable(value.tolist())
+    if isinstance(value, (np.floating, float)):
+        return round(float(value), 6)
+    if isinstance(value, np.integer):
+        return int(value)
+    if isinstance(value, Path):
+        return value.name
+    return value
+
+
+def _settings(config: TrainConfig) -> dict[str, Any]:
+    """Return a config's settings as a trial holds them: all but the bookkeeping."""
+    return {k: v for k, v in vars(config).items() if k not in BOOKKEEPING}
 
 
 def read_trial(run_dir: Path) -> dict[str, Any]:
@@ -73,13 +141,13 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
     heldout = final.get(HELDOUT)
     traces = (list(read_traces(run_dir / EVAL, FINAL_SETS[HELDOUT], heldout['seeds']))
               if heldout else [])
-    key = {k: v for k, v in vars(_spelled_out(config)).items() if k not in BOOKKEEPING}
+    key = _settings(_spelled_out(config))
     return {'name': run_dir.name, 'run_dir': run_dir, 'seed': config.seed, 'settings': key,
             'final': final, 'curve': curve,
             'anatomy': anatomy.traces_anatomy(traces, results.get('arena'), half_fov(config)),
             'values': calibration.traces_values(traces, config),
             'curve_values': curve_values,
-            'finished': (run_dir / FINAL_MODEL).is_file(),
+            'finished': (run_dir / FINAL_MODEL).is_file(), 'exported': False,
             'wall_clock_s': summary.get('wall_clock_total_s'),
             'steps': summary.get('num_timesteps')}
 
@@ -111,13 +179,12 @@ def group_trials(trials: list[dict[str, Any]], names: dict[str, str]) -> dict[st
     groups: list[tuple[dict, list[dict]]] = []
     for trial in trials:
         for settings, members in groups:
-            if settings == trial['settings']:
+            if jsonable(settings) == jsonable(trial['settings']):
                 members.append(trial)
                 break
         else:
             groups.append((trial['settings'], [trial]))
-    defaults = {k: v for k, v in vars(TrainConfig().with_full_sim_params()).items()
-                if k not in BOOKKEEPING}
+    defaults = _settings(TrainConfig().with_full_sim_params())
     out: dict[str, list[dict]] = {}
     for settings, members in groups:
         label = next((names[m['name']] for m in members if m['name'] in names), None)

@@ -16,10 +16,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from nav_eval.analysis import calibration, stats
 from nav_eval.reporting.format import num, pct, table, to_html
+from nav_eval.sweeps.collect import RATES, jsonable
 from nav_eval.sweeps.figures import write_figures
 from nav_eval.sweeps.spec import (
     SWEEP_FIGURES,
@@ -27,7 +26,7 @@ from nav_eval.sweeps.spec import (
     SWEEP_REPORT,
     SWEEP_RESULTS,
 )
-from nav_eval.sweeps.statistics import RATES, summarise
+from nav_eval.sweeps.statistics import summarise
 from nav_gym.training.spec import learner_of
 from nav_sim.core.config import HELDOUT, TRAIN
 
@@ -187,22 +186,6 @@ def _calibration_markdown(rows: list[dict[str, Any]]) -> list[str]:
     return lines
 
 
-def _jsonable(value: Any) -> Any:
-    if isinstance(value, dict):
-        return {str(k): _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, np.ndarray):
-        return _jsonable(value.tolist())
-    if isinstance(value, (np.floating, float)):
-        return round(float(value), 6)
-    if isinstance(value, np.integer):
-        return int(value)
-    if isinstance(value, Path):
-        return value.name
-    return value
-
-
 def write_sweep_report(folder: Path) -> Path:
     """Aggregate the trials under ``folder``; write the report files; return Sweep.md.
 
@@ -218,6 +201,6 @@ def write_sweep_report(folder: Path) -> Path:
     text = _markdown(folder, data, {k: f'{SWEEP_FIGURES}/{v}' for k, v in figures.items()})
     (folder / SWEEP_REPORT).write_text(text + '\n')
     (folder / SWEEP_HTML).write_text(to_html(text, folder, f'sweep {folder.name}'))
-    (folder / SWEEP_RESULTS).write_text(json.dumps(_jsonable(data), indent=1,
+    (folder / SWEEP_RESULTS).write_text(json.dumps(jsonable(data), indent=1,
                                                    sort_keys=True) + '\n')
     return folder / SWEEP_REPORT

@@ -11,8 +11,11 @@ from nav_eval.analysis import anatomy, calibration, stats
 from nav_eval.errors import SweepError
 from nav_eval.sweeps.collect import (
     FINAL_SETS,
+    RATES,
+    exported_dirs,
     group_trials,
     missing_line,
+    read_exported,
     read_json,
     read_trial,
     trial_configs,
@@ -24,8 +27,6 @@ from nav_eval.sweeps.spec import (
     SWEEP_FILE,
 )
 from nav_sim.core.config import HELDOUT
-
-RATES = ('success_rate', 'collision_rate', 'timeout_rate', 'mean_spl')
 
 
 def per_seed_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
@@ -124,7 +125,8 @@ def bank_rows(folder: Path, groups: dict[str, list[dict]]) -> list[dict[str, Any
             by_policy.setdefault(s['policy'], {})[s['split']] = s['episodes']
         dqn = {split: [e for t in groups[config] for e in t['final'].get(split, {})
                        .get('episodes', [])] for split in FINAL_SETS}
-        if all(dqn.values()):
+        # a summary's trials keep no episodes: a pool without them would be some seeds' only
+        if all(dqn.values()) and not any(t['exported'] for t in groups[config]):
             by_policy['DQN final (all seeds pooled)'] = dqn
         for policy, splits in by_policy.items():
             if set(splits) != set(FINAL_SETS):
@@ -155,13 +157,14 @@ def summarise(folder: Path) -> tuple[dict[str, Any], dict[str, Any], dict[str, A
     Returns the report's data (what results.json holds, but for the sample-efficiency
     summary), the held-out success score matrices and the curves (the figures' inputs).
     """
-    runs = trial_dirs(folder)
-    if not runs:
-        raise SweepError(f'{folder} holds no run directories (trials/*/config.yaml): run a '
-                         'sweep with `visnav-sweep` or pass a folder of training runs')
+    runs, summaries = trial_dirs(folder), exported_dirs(folder)
+    if not runs and not summaries:
+        raise SweepError(f'{folder} holds no run directories (trials/*/config.yaml) and no '
+                         'sweep summaries (visnav-sweep --export): run a sweep with '
+                         '`visnav-sweep` or pass a folder of training runs or summaries')
     spec = read_json(folder / SWEEP_FILE) or {}
     names = trial_configs(folder, spec)
-    trials = [read_trial(r) for r in runs]
+    trials = [read_trial(r) for r in runs] + [t for s in summaries for t in read_exported(s)]
     groups = group_trials(trials, names)
     missing = [missing_line(t, folder, spec) for t in trials if len(t['final']) < 2]
     banks = bank_rows(folder, groups)

@@ -116,18 +116,22 @@ def test_aggregating_again_gives_identical_files_and_resume_runs_nothing(finishe
     assert snapshot(folder) == before
 
 
+def copy_run(source: Path, copy: Path, turn_speed: float | None, *leave_out: str) -> None:
+    """Copy a run without its checkpoints and TensorBoard logs, with another turn_speed."""
+    shutil.copytree(source, copy, ignore=shutil.ignore_patterns('checkpoints', 'tb', *leave_out))
+    if turn_speed is not None:
+        config = yaml.safe_load((copy / 'config.yaml').read_text())
+        config['turn_speed'] = turn_speed
+        (copy / 'config.yaml').write_text(yaml.safe_dump(config))
+
+
 def test_aggregate_a_folder_of_runs_with_two_configurations(finished, tmp_path):
     folder, result = finished
     assert result.returncode == 0, explain(result)
     for seed in (1, 2):
         for label, turn_speed in (('a', None), ('b', 0.02)):
-            copy = tmp_path / f'{label}{seed}'
-            shutil.copytree(folder / 'trials' / f'seed{seed}', copy,
-                            ignore=shutil.ignore_patterns('checkpoints', 'tb', 'traces'))
-            if turn_speed is not None:
-                config = yaml.safe_load((copy / 'config.yaml').read_text())
-                config['turn_speed'] = turn_speed
-                (copy / 'config.yaml').write_text(yaml.safe_dump(config))
+            copy_run(folder / 'trials' / f'seed{seed}', tmp_path / f'{label}{seed}', turn_speed,
+                     'traces')
     done = sweep('--aggregate', str(tmp_path), timeout=300)
     assert done.returncode == 0, explain(done)
     results = json.loads((tmp_path / 'results.json').read_text())
@@ -159,6 +163,53 @@ def test_a_run_from_before_a_sim_setting_groups_with_its_new_twin(finished, tmp_
     configurations = json.loads((tmp_path / 'results.json').read_text())['configurations']
     assert list(configurations.values()) == [['seed1', 'seed2']], configurations
     assert 'None' not in (tmp_path / 'Sweep.md').read_text()
+
+
+def test_exported_summaries_aggregate_with_runs_by_their_settings(finished, tmp_path):
+    """A summary (--export) keeps per-seed rates: its trials join runs of the same settings."""
+    folder, result = finished
+    assert result.returncode == 0, explain(result)
+    exported = sweep('--export', str(folder), str(tmp_path / 'exp'), timeout=300)
+    assert exported.returncode == 0, explain(exported)
+    # an older summary: made before aux_depth and randomize_look existed (their defaults)
+    older = tmp_path / 'exp' / 'results.json'
+    data = json.loads(older.read_text())
+    for settings in data['settings'].values():
+        del settings['aux_depth'], settings['sim_params']['randomize_look']
+        settings['checkpoint_freq'] = 7  # bookkeeping: no other configuration
+    older.write_text(json.dumps(data))
+    for name, turn_speed in (('a1', None), ('b1', 0.02), ('b2', 0.02)):
+        copy_run(folder / 'trials' / f'seed{name[1]}', tmp_path / name, turn_speed)
+    done = sweep('--aggregate', str(tmp_path), timeout=300)
+    assert done.returncode == 0, explain(done)
+    results = json.loads((tmp_path / 'results.json').read_text())
+    assert results['configurations'] == {'turn_speed=0.03': ['a1', 'exp:seed1', 'exp:seed2'],
+                                         'turn_speed=0.02': ['b1', 'b2']}
+    original = {r['trial']: r for r in json.loads(
+        (folder / 'results.json').read_text())['per_seed']}
+    rows = {r['trial']: r for r in results['per_seed']}
+    for seed in (1, 2):
+        mine, theirs = rows[f'exp:seed{seed}'], original[f'seed{seed}']
+        for key in ('seed', 'steps', 'heldout_success_rate', 'heldout_collision_rate',
+                    'train_success_rate', 'heldout_episodes'):
+            assert mine[key] == theirs[key], key
+    assert set(results['aggregates']['success_rate']) == {'turn_speed=0.03', 'turn_speed=0.02'}
+    assert results['aggregates']['success_rate']['turn_speed=0.03']['IQM']
+    assert set(results['improvement']) == {'turn_speed=0.03 > turn_speed=0.02',
+                                           'turn_speed=0.02 > turn_speed=0.03'}
+    # a summary keeps no episodes: the pooled bank row would hold one seed of three
+    pooled = {r['config'] for r in results['banks'] if r['policy'].startswith('DQN')}
+    assert pooled == {'turn_speed=0.02'}
+    # the runs' own anatomy stays; the summary's trials add none
+    assert {r['config'] for r in results['anatomy']} == {'turn_speed=0.03', 'turn_speed=0.02'}
+
+
+def test_aggregating_a_folder_without_runs_or_summaries_says_what_it_needs(tmp_path):
+    (tmp_path / 'notes').mkdir()
+    done = sweep('--aggregate', str(tmp_path), timeout=120)
+    assert done.returncode != 0
+    assert 'holds no run directories (trials/*/config.yaml) and no sweep summaries' in \
+        done.stderr, explain(done)
 
 
 def test_the_report_names_the_command_that_completes_each_missing_trial(finished, tmp_path):
