@@ -7,7 +7,9 @@ For one machine that has no Ray (a lent accelerator machine): each trial is the 
 ones a Ray sweep writes, and ``visnav-sweep --aggregate`` or ``--resume`` reads them.  Baseline
 trials are left out (make the sweep with ``--no-baselines``).  ``--stop-after``: SIGINT every
 trial's child after that many seconds, so that each saves a checkpoint before an outer limit
-kills it; a later ``--resume`` (here or under Ray) goes on from there.
+kills it; running this again on that machine goes on from there.  A sweep packed without its
+models (``screen.sh``) is for ``--aggregate`` only: ``visnav-sweep --resume`` would start its
+trials afresh.
 """
 
 from __future__ import annotations
@@ -36,34 +38,44 @@ def main() -> int:
     spec = load_spec(args.sweep_dir)
     trials = [t for t in spec.trials() if t['kind'] == 'train' and not trial_finished(t)]
     results: dict[str, object] = {}
+    lock = threading.Lock()
+    stopping = threading.Event()
     start = time.monotonic()
 
     def one(trial: dict) -> None:
+        figures: dict[str, object] = {}
+        outcome: object = figures
         try:
-            run_trial(trial, lambda figures: results.__setitem__(trial['name'], figures))
+            run_trial(trial, figures.update)
         except Exception as exc:  # noqa: BLE001 - reported with the trial's name
-            results[trial['name']] = f'FAILED: {exc}'
-        print(f"{time.monotonic() - start:7.1f} s {trial['name']}: "
-              f"{json.dumps(results[trial['name']])}", flush=True)
+            outcome = ('STOPPED (saved; run again to go on)' if stopping.is_set()
+                       else f'FAILED: {exc}')
+        with lock:
+            results[trial['name']] = outcome
+            print(f"{time.monotonic() - start:7.1f} s {trial['name']}: {json.dumps(outcome)}",
+                  flush=True)
 
     threads = [threading.Thread(target=one, args=(t,), daemon=True) for t in trials]
     print(f'{len(threads)} trials of {args.sweep_dir} at once', flush=True)
     for thread in threads:
         thread.start()
+        time.sleep(0.5)  # their children start one at a time (fork beside threads)
     deadline = start + args.stop_after if args.stop_after else None
     while any(t.is_alive() for t in threads):
         if deadline and time.monotonic() > deadline:
             print(f'{time.monotonic() - start:7.1f} s: stopping the trials (they save)',
                   flush=True)
+            stopping.set()
             _interrupt_children()
             for thread in threads:  # each saves a checkpoint, then its thread ends
                 thread.join(max(0.0, deadline + GRACE_SECONDS - time.monotonic()))
             break
         time.sleep(2)
-    failed = [name for name, r in results.items() if not isinstance(r, dict)]
-    print(f'{time.monotonic() - start:.1f} s: {len(results) - len(failed)} finished, '
-          f'{len(failed)} failed', flush=True)
-    return 1 if failed or len(results) < len(trials) else 0
+    with lock:
+        outcomes = dict(results)
+    finished = sum(isinstance(r, dict) for r in outcomes.values())
+    print(f'{time.monotonic() - start:.1f} s: {finished} of {len(trials)} finished', flush=True)
+    return 0 if finished == len(trials) else 1
 
 
 def _interrupt_children() -> None:

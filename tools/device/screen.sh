@@ -28,3 +28,4 @@ echo "# trials: exit $code after $((SECONDS - start)) s"
 tar --exclude='*replay_buffer*' --exclude='*_frames.npz' --exclude='*.zip' -czf "$OUT/$name.tgz" \
     -C runs "$name"
 ls -la "$OUT"
+exit $code

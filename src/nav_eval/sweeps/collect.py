@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -30,6 +31,7 @@ from nav_gym.training.run_dir import (
     is_curve_point,
     load_config,
     read_traces,
+    run_settings,
 )
 from nav_sim.core.config import HELDOUT, TRAIN, SimConfig
 from nav_sim.errors import NavSimError
@@ -39,6 +41,8 @@ FINAL_SETS = {TRAIN: 'dqn_train', HELDOUT: 'dqn_heldout'}
 RATES = ('success_rate', 'collision_rate', 'timeout_rate', 'mean_spl')
 
 
+#: the settings a training config has today
+TRAIN_FIELDS = frozenset(f.name for f in dataclasses.fields(TrainConfig))
 #: settings that say how a run is kept and where it runs, not what it learns: trials that differ
 #: only in these are one configuration (a checkpoint's save changes nothing the learner draws)
 BOOKKEEPING = ('seed', 'run_name', 'runs_dir', 'device', 'namespace', 'sim', 'sim_timeout',
@@ -63,44 +67,78 @@ def trial_dirs(folder: Path) -> list[Path]:
 def exported_dirs(folder: Path) -> list[Path]:
     """Return the sweep summaries (``visnav-sweep --export``) directly in ``folder``.
 
-    A summary is a folder with a results.json that has per-seed rows, and no run directory.
+    A summary is a folder with a results.json that has per-seed rows, and no run directory.  A
+    whole sweep directory there is left out, with a line that says how to include it: its
+    trials' own folders have more than its summary (episodes, curves, anatomy).
     """
     if not folder.is_dir():
         return []
-    return sorted(p for p in folder.iterdir() if p.is_dir() and not (p / CONFIG).is_file()
-                  and 'per_seed' in (read_json(p / SWEEP_RESULTS) or {}))
+    out = []
+    for path in sorted(p for p in folder.iterdir() if p.is_dir() and not (p / CONFIG).is_file()):
+        if 'per_seed' not in (read_json(path / SWEEP_RESULTS) or {}):
+            continue
+        if (path / TRIALS).is_dir():
+            print(f'{path.name}: a sweep directory, left out: link its trials ({path / TRIALS}/*) '
+                  f'into {folder}, or aggregate its --export', flush=True)
+            continue
+        out.append(path)
+    return out
 
 
-def read_exported(summary: Path) -> list[dict[str, Any]]:
-    """Return the trials of one sweep summary, from its per-seed rows.
+def read_exported(summaries: list[Path]) -> list[dict[str, Any]]:
+    """Return the trials of sweep summaries, from their per-seed rows, each trial once.
 
     A summary keeps each trial's final rates, not its episodes: such a trial (``exported``)
     counts in the aggregates and the probability of improvement, and has no curve, anatomy,
-    calibration or pooled bank row.  Settings that the summary's code did not have yet are
-    today's defaults, as for an older run's config (``load_config``).  Its name is
-    ``<summary>:<trial>``.
+    calibration or pooled bank row.  Its settings are read as an older run's config is
+    (:func:`_summary_settings`).  Its name is ``<summary>:<trial>``.  A trial that two summaries
+    hold (a comparison's summary beside the sweep's own) counts once: the first read.
     """
-    data = read_json(summary / SWEEP_RESULTS) or {}
-    defaults = jsonable(_settings(TrainConfig().with_full_sim_params()))
-    trials = []
-    for row in data.get('per_seed', []):
-        kept = {k: v for k, v in data.get('settings', {}).get(row['config'], {}).items()
-                if k not in BOOKKEEPING}
-        settings = {**defaults, **kept, 'sim_params': {**defaults['sim_params'],
-                                                       **(kept.get('sim_params') or {})}}
-        final = {split: {'summary': {**{rate: row[f'{split}_{rate}'] for rate in RATES},
-                                     'episodes': row[f'{split}_episodes']}}
-                 for split in FINAL_SETS if f'{split}_success_rate' in row}
-        trials.append({'name': f"{summary.name}:{row['trial']}", 'run_dir': summary,
-                       'seed': row['seed'], 'settings': settings, 'final': final,
-                       'curve': {}, 'anatomy': [], 'values': [], 'curve_values': {},
-                       'finished': True, 'exported': True,
-                       'wall_clock_s': row.get('wall_clock_s'), 'steps': row.get('steps')})
+    trials, seen = [], set()
+    for summary in summaries:
+        data = read_json(summary / SWEEP_RESULTS) or {}
+        for row in data.get('per_seed', []):
+            original = row['trial'].rsplit(':', 1)[-1]
+            key = (original, row['seed'], row.get('steps'), row.get('wall_clock_s'),
+                   *(row.get(f'{split}_{rate}') for split in FINAL_SETS for rate in RATES))
+            if key in seen:
+                continue
+            seen.add(key)
+            final = {split: {'summary': {**{rate: row[f'{split}_{rate}'] for rate in RATES},
+                                         'episodes': row[f'{split}_episodes']}}
+                     for split in FINAL_SETS if f'{split}_success_rate' in row}
+            trials.append({'name': f"{summary.name}:{row['trial']}", 'run_dir': summary,
+                           'seed': row['seed'],
+                           'settings': _summary_settings(data.get('settings', {}), row),
+                           'final': final, 'curve': {}, 'anatomy': [], 'values': [],
+                           'curve_values': {}, 'finished': True, 'exported': True,
+                           'wall_clock_s': row.get('wall_clock_s'), 'steps': row.get('steps')})
     return trials
 
 
+def _summary_settings(settings: dict[str, Any], row: dict[str, Any]) -> dict[str, Any]:
+    """Return a summary trial's settings as :func:`read_trial` gives a run's.
+
+    The settings its code did not have yet take the values of that time, as an older run's
+    config.yaml does (``run_settings``: today's defaults, except where a default changed), and
+    its world fills the sim parameters.  A setting that today's code no longer has is kept, so
+    the trial groups only with its like.  A row whose configuration has no settings in the
+    summary is a group of its own (named by its configuration).
+    """
+    kept = settings.get(row['config'])
+    if kept is None:
+        return {'summary configuration': row['config']}
+    kept = {k: v for k, v in kept.items() if k not in BOOKKEEPING}
+    known = {k: v for k, v in kept.items() if k in TRAIN_FIELDS}
+    try:
+        config = _spelled_out(TrainConfig(**run_settings(known)))
+    except (NavGymError, NavSimError, TypeError, ValueError):
+        return kept
+    return {**_settings(config), **{k: v for k, v in kept.items() if k not in known}}
+
+
 def jsonable(value: Any) -> Any:
-    """Return ``value`` as results.json writes it (lists, rounded floats, plain numbers)."""
+    """Return ``value`` as results.json writes it: lists, plain numbers, 6 significant digits."""
     if isinstance(value, dict):
         return {str(k): jsonable(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
@@ -108,7 +146,7 @@ def jsonable(value: Any) -> Any:
     if isinstance(value, np.ndarray):
         return jsonable(value.tolist())
     if isinstance(value, (np.floating, float)):
-        return round(float(value), 6)
+        return float(f'{float(value):.6g}')
     if isinstance(value, np.integer):
         return int(value)
     if isinstance(value, Path):
@@ -203,7 +241,8 @@ def _flat(settings: dict[str, Any]) -> dict[str, Any]:
 
 def _difference_label(settings: dict, others: list[dict]) -> str:
     mine = _flat(settings)
-    keys = sorted({k for o in others for k, v in _flat(o).items() if mine.get(k) != v})
+    keys = sorted({k for o in others for k, v in _flat(o).items()
+                   if jsonable(mine.get(k)) != jsonable(v)})
     return ', '.join(f'{k}={mine.get(k)}' for k in keys) or 'defaults'
 
 
@@ -211,7 +250,11 @@ def missing_line(trial: dict[str, Any], folder: Path, spec: dict[str, Any]) -> s
     """Say what a trial without its final evaluation lacks and the command that completes it.
 
     In a sweep (``spec`` from sweep.json) its resume does both; a folder of runs has the banks.
+    A summary's trial is complete only where its own folder is (elsewhere).
     """
+    if trial['exported']:
+        return (f"{trial['name']}: no final evaluation in its summary ({trial['run_dir']}); "
+                'complete the trial where its sweep directory is, then export it again')
     if spec:
         # a sweep's resume finishes its trainings and then their evaluations
         what = 'training unfinished' if not trial['finished'] else 'no final evaluation'

@@ -52,7 +52,9 @@ def anatomy_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
         if not pooled:
             continue
         pools = [(t['seed'], t['anatomy']) for t in members if t['anatomy']]
-        for seed, episodes in pools + ([('all', pooled)] if len(pools) > 1 else []):
+        # 'all' when every trial is in the pool (a summary's trials keep no anatomy)
+        label = 'all' if len(pools) == len(members) else ', '.join(str(s) for s, _ in pools)
+        for seed, episodes in pools + ([(label, pooled)] if len(pools) > 1 else []):
             for outcome, figures in anatomy.summarise(episodes).items():
                 rows.append({'config': config, 'seed': seed, 'outcome': outcome, **figures})
     return rows
@@ -102,9 +104,13 @@ def configuration_stats(groups: dict[str, list[dict]]) -> dict[str, Any]:
 
 
 def curve_scores(groups: dict[str, list[dict]]) -> dict[str, Any]:
-    """Return per configuration the checkpoints every trial evaluated and a score matrix."""
+    """Return per configuration the checkpoints every run evaluated and a score matrix.
+
+    A summary's trials have no curve: the curve is their configuration's runs' alone.
+    """
     out = {}
-    for config, members in groups.items():
+    for config, everyone in groups.items():
+        members = [t for t in everyone if not t['exported']]  # a summary keeps no curve
         common = sorted(set.intersection(*(set(t['curve']) for t in members))) if members \
             else []
         if not common:
@@ -164,7 +170,7 @@ def summarise(folder: Path) -> tuple[dict[str, Any], dict[str, Any], dict[str, A
                          '`visnav-sweep` or pass a folder of training runs or summaries')
     spec = read_json(folder / SWEEP_FILE) or {}
     names = trial_configs(folder, spec)
-    trials = [read_trial(r) for r in runs] + [t for s in summaries for t in read_exported(s)]
+    trials = [read_trial(r) for r in runs] + read_exported(summaries)
     groups = group_trials(trials, names)
     missing = [missing_line(t, folder, spec) for t in trials if len(t['final']) < 2]
     banks = bank_rows(folder, groups)

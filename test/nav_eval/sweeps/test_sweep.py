@@ -178,13 +178,33 @@ def test_exported_summaries_aggregate_with_runs_by_their_settings(finished, tmp_
         del settings['aux_depth'], settings['sim_params']['randomize_look']
         settings['checkpoint_freq'] = 7  # bookkeeping: no other configuration
     older.write_text(json.dumps(data))
+    # the same summary once more, as a comparison's export that holds its trials: counted once
+    shutil.copytree(tmp_path / 'exp', tmp_path / 'zcmp')
+    again = tmp_path / 'zcmp' / 'results.json'
+    data = json.loads(again.read_text())
+    for row in data['per_seed']:
+        row['trial'] = f"exp:{row['trial']}"
+    again.write_text(json.dumps(data))
+    # one from before n_steps and double_q: 1-step DQN then (LEGACY_DEFAULTS), not today's
+    shutil.copytree(tmp_path / 'exp', tmp_path / 'old')
+    oldest = tmp_path / 'old' / 'results.json'
+    data = json.loads(oldest.read_text())
+    for settings in data['settings'].values():
+        del settings['n_steps'], settings['double_q']
+    data['per_seed'] = data['per_seed'][:1]
+    data['per_seed'][0]['wall_clock_s'] = 1.0  # another run than exp's
+    oldest.write_text(json.dumps(data))
     for name, turn_speed in (('a1', None), ('b1', 0.02), ('b2', 0.02)):
         copy_run(folder / 'trials' / f'seed{name[1]}', tmp_path / name, turn_speed)
     done = sweep('--aggregate', str(tmp_path), timeout=300)
     assert done.returncode == 0, explain(done)
     results = json.loads((tmp_path / 'results.json').read_text())
-    assert results['configurations'] == {'turn_speed=0.03': ['a1', 'exp:seed1', 'exp:seed2'],
-                                         'turn_speed=0.02': ['b1', 'b2']}
+    # labels name what differs between the three: turn_speed, and double_q and n_steps
+    today, turn, legacy = ('double_q=True, n_steps=3, turn_speed=0.03',
+                           'double_q=True, n_steps=3, turn_speed=0.02',
+                           'double_q=False, n_steps=1, turn_speed=0.03')
+    assert results['configurations'] == {today: ['a1', 'exp:seed1', 'exp:seed2'],
+                                         turn: ['b1', 'b2'], legacy: ['old:seed1']}
     original = {r['trial']: r for r in json.loads(
         (folder / 'results.json').read_text())['per_seed']}
     rows = {r['trial']: r for r in results['per_seed']}
@@ -193,15 +213,15 @@ def test_exported_summaries_aggregate_with_runs_by_their_settings(finished, tmp_
         for key in ('seed', 'steps', 'heldout_success_rate', 'heldout_collision_rate',
                     'train_success_rate', 'heldout_episodes'):
             assert mine[key] == theirs[key], key
-    assert set(results['aggregates']['success_rate']) == {'turn_speed=0.03', 'turn_speed=0.02'}
-    assert results['aggregates']['success_rate']['turn_speed=0.03']['IQM']
-    assert set(results['improvement']) == {'turn_speed=0.03 > turn_speed=0.02',
-                                           'turn_speed=0.02 > turn_speed=0.03'}
+    assert results['aggregates']['success_rate'][today]['IQM']
+    assert f'{today} > {turn}' in results['improvement']
+    # the runs' curve stays (a summary keeps none)
+    assert results['sample_efficiency'][today]['steps']
     # a summary keeps no episodes: the pooled bank row would hold one seed of three
     pooled = {r['config'] for r in results['banks'] if r['policy'].startswith('DQN')}
-    assert pooled == {'turn_speed=0.02'}
+    assert pooled == {turn}
     # the runs' own anatomy stays; the summary's trials add none
-    assert {r['config'] for r in results['anatomy']} == {'turn_speed=0.03', 'turn_speed=0.02'}
+    assert {r['config'] for r in results['anatomy']} == {today, turn}
 
 
 def test_aggregating_a_folder_without_runs_or_summaries_says_what_it_needs(tmp_path):
