@@ -27,10 +27,12 @@ from nav_eval.sweeps.trial import run_trial, trial_finished
 
 #: how long stopped trials get to save before the runner returns anyway
 GRACE_SECONDS = 40
+#: the exit code when no trial failed but some were stopped at --stop-after (run again)
+STOPPED = 2
 
 
 def main() -> int:
-    """Run the sweep's unfinished training trials; return 0 if all finished."""
+    """Run the sweep's unfinished training trials; return 0 if all finished, 2 if stopped."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('sweep_dir', type=Path)
     parser.add_argument('--stop-after', type=float, default=0)
@@ -74,8 +76,12 @@ def main() -> int:
     with lock:
         outcomes = dict(results)
     finished = sum(isinstance(r, dict) for r in outcomes.values())
-    print(f'{time.monotonic() - start:.1f} s: {finished} of {len(trials)} finished', flush=True)
-    return 0 if finished == len(trials) else 1
+    failed = sum(str(r).startswith('FAILED') for r in outcomes.values())
+    print(f'{time.monotonic() - start:.1f} s: {finished} of {len(trials)} finished, '
+          f'{failed} failed', flush=True)
+    if finished == len(trials):
+        return 0
+    return 1 if failed else STOPPED
 
 
 def _interrupt_children() -> None:

@@ -98,9 +98,13 @@ def read_exported(summaries: list[Path]) -> list[dict[str, Any]]:
     for summary in summaries:
         data = read_json(summary / SWEEP_RESULTS) or {}
         for row in data.get('per_seed', []):
-            original = row['trial'].rsplit(':', 1)[-1]
-            key = (original, row['seed'], row.get('steps'), row.get('wall_clock_s'),
-                   *(row.get(f'{split}_{rate}') for split in FINAL_SETS for rate in RATES))
+            settings = _summary_settings(data.get('settings', {}), row, summary.name)
+            # the trial's own figures, not its name (comparisons rename their trials), at a
+            # precision that every writer of results.json kept
+            figures = [row.get(k) for k in ('steps', 'wall_clock_s', *(
+                f'{split}_{rate}' for split in FINAL_SETS for rate in (*RATES, 'episodes')))]
+            key = json.dumps([row['seed'], jsonable(settings),
+                              [f'{v:.4g}' if isinstance(v, float) else v for v in figures]])
             if key in seen:
                 continue
             seen.add(key)
@@ -108,15 +112,15 @@ def read_exported(summaries: list[Path]) -> list[dict[str, Any]]:
                                          'episodes': row[f'{split}_episodes']}}
                      for split in FINAL_SETS if f'{split}_success_rate' in row}
             trials.append({'name': f"{summary.name}:{row['trial']}", 'run_dir': summary,
-                           'seed': row['seed'],
-                           'settings': _summary_settings(data.get('settings', {}), row),
+                           'seed': row['seed'], 'settings': settings,
                            'final': final, 'curve': {}, 'anatomy': [], 'values': [],
                            'curve_values': {}, 'finished': True, 'exported': True,
                            'wall_clock_s': row.get('wall_clock_s'), 'steps': row.get('steps')})
     return trials
 
 
-def _summary_settings(settings: dict[str, Any], row: dict[str, Any]) -> dict[str, Any]:
+def _summary_settings(settings: dict[str, Any], row: dict[str, Any], summary: str
+                      ) -> dict[str, Any]:
     """Return a summary trial's settings as :func:`read_trial` gives a run's.
 
     The settings its code did not have yet take the values of that time, as an older run's
@@ -132,8 +136,10 @@ def _summary_settings(settings: dict[str, Any], row: dict[str, Any]) -> dict[str
     known = {k: v for k, v in kept.items() if k in TRAIN_FIELDS}
     try:
         config = _spelled_out(TrainConfig(**run_settings(known)))
-    except (NavGymError, NavSimError, TypeError, ValueError):
-        return kept
+    except (NavGymError, NavSimError, TypeError, ValueError) as exc:
+        print(f"{summary}: the settings of {row['config']} do not load here ({exc}); its "
+              'trials are grouped by the settings as saved', flush=True)
+        return run_settings(kept)
     return {**_settings(config), **{k: v for k, v in kept.items() if k not in known}}
 
 

@@ -505,3 +505,19 @@ def test_grid_points_that_share_a_name_once_cut_are_refused(tmp_path):
     spec.grid['learning_rate'] = ['0.0001', '0.0002']
     assert [n for n, _ in spec.configurations()] == ['learning_rate=0.0001',
                                                      'learning_rate=0.0002']
+
+
+def test_a_summary_whose_settings_do_not_load_here_groups_by_them_as_saved(tmp_path, capsys):
+    from nav_eval.sweeps.collect import exported_dirs, read_exported
+    row = {'config': 'c', 'trial': 'seed1', 'seed': 1, 'steps': 50000, 'wall_clock_s': 1.5,
+           **{f'{split}_{rate}': 0.5 for split in ('train', 'heldout')
+              for rate in ('success_rate', 'collision_rate', 'timeout_rate', 'mean_spl')},
+           'train_episodes': 2, 'heldout_episodes': 2}
+    (tmp_path / 's').mkdir()
+    (tmp_path / 's' / 'results.json').write_text(json.dumps(
+        {'per_seed': [row, dict(row)], 'settings': {'c': {'learning_rate': -1.0}}}))
+    trials = read_exported(exported_dirs(tmp_path))
+    assert [t['name'] for t in trials] == ['s:seed1']  # the same trial twice: once
+    # the values of its time (run_settings) fill what it does not name
+    assert trials[0]['settings'] == {'learning_rate': -1.0, 'double_q': False, 'n_steps': 1}
+    assert 's: the settings of c do not load here' in capsys.readouterr().out
