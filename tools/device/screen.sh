@@ -11,13 +11,17 @@ for f in .gl/*.deb; do [ -e "$f" ] && dpkg -x "$f" /; done; ldconfig
 vendor=/usr/local/nvidia/share/glvnd/egl_vendor.d/10_nvidia.json
 [ -e $vendor ] && export __EGL_VENDOR_LIBRARY_FILENAMES=$vendor
 base=$(python3 -c 'import sys; print(sys.prefix)')
-python3 -m venv --without-pip /tmp/venv || exit 1
-site=$(echo /tmp/venv/lib/python3.*/site-packages)
-# the image's packages (torch, numpy, ...) after the venv's own
-python3 -c 'import site; print("\n".join(site.getsitepackages()))' > "$site/image.pth"
-/tmp/venv/bin/python -m pip install -q --no-index --no-deps --no-compile \
-    .whl/*.whl || exit 1
-echo "# set-up: $((SECONDS - start)) s ($base)"
+if [ -x /tmp/venv/bin/python ]; then  # a second call on the warm machine: resume
+    echo "# set-up: /tmp/venv is there already"
+else
+    python3 -m venv --without-pip /tmp/venv || exit 1
+    site=$(echo /tmp/venv/lib/python3.*/site-packages)
+    # the image's packages (torch, numpy, ...) after the venv's own
+    python3 -c 'import site; print("\n".join(site.getsitepackages()))' > "$site/image.pth"
+    /tmp/venv/bin/python -m pip install -q --no-index --no-deps --no-compile \
+        .whl/*.whl || exit 1
+    echo "# set-up: $((SECONDS - start)) s ($base)"
+fi
 export MUJOCO_GL=egl PYTHONUNBUFFERED=1
 nvidia-smi --query-gpu=name,memory.used --format=csv,noheader
 /tmp/venv/bin/python -c 'import rclpy, mujoco, torch, stable_baselines3, nav_gym.training.trainer; print("imports ok, cuda", torch.cuda.is_available())
