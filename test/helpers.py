@@ -57,7 +57,8 @@ def interrupt(process: subprocess.Popen, timeout: float = 15.0) -> tuple[int, st
     """Press Ctrl-C (SIGINT) on a child started with text pipes; its exit code and output.
 
     A child that has exited already is only reaped; one still running ``timeout`` seconds
-    after the SIGINT is killed (and its exit code says so).
+    after the SIGINT is killed (and its exit code says so).  A child that writes to files
+    instead of pipes gives an empty output.
     """
     if process.poll() is None:
         process.send_signal(signal.SIGINT)
@@ -66,7 +67,7 @@ def interrupt(process: subprocess.Popen, timeout: float = 15.0) -> tuple[int, st
     except subprocess.TimeoutExpired:
         process.kill()
         out, err = process.communicate()
-    return process.returncode, out + err
+    return process.returncode, (out or '') + (err or '')
 
 
 def make_tiny_run(path, spaces_only: type, steps: int = 32, **settings: object):  # noqa: ANN201

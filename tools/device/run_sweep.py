@@ -1,6 +1,6 @@
-"""Run a sweep directory's training trials at once, one thread each, without Ray.
+"""Run sweep directories' training trials at once, one thread each, without Ray.
 
-    python tools/device/run_sweep.py runs/NAME [--stop-after SECONDS]
+    python tools/device/run_sweep.py runs/NAME [runs/NAME2 ...] [--stop-after SECONDS]
 
 For one machine that has no Ray (a lent accelerator machine): each trial is the sweep's own
 :func:`nav_eval.sweeps.trial.run_trial`, so its child, logs, checkpoints and evaluations are the
@@ -34,11 +34,11 @@ STOPPED = 2
 def main() -> int:
     """Run the sweep's unfinished training trials; return 0 if all finished, 2 if stopped."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('sweep_dir', type=Path)
+    parser.add_argument('sweep_dirs', type=Path, nargs='+', metavar='SWEEP_DIR')
     parser.add_argument('--stop-after', type=float, default=0)
     args = parser.parse_args()
-    spec = load_spec(args.sweep_dir)
-    trials = [t for t in spec.trials() if t['kind'] == 'train' and not trial_finished(t)]
+    trials = [t for sweep_dir in args.sweep_dirs for t in load_spec(sweep_dir).trials()
+              if t['kind'] == 'train' and not trial_finished(t)]
     results: dict[str, object] = {}
     lock = threading.Lock()
     stopping = threading.Event()
@@ -53,12 +53,13 @@ def main() -> int:
             outcome = ('STOPPED (saved; run again to go on)' if stopping.is_set()
                        else f'FAILED: {exc}')
         with lock:
-            results[trial['name']] = outcome
-            print(f"{time.monotonic() - start:7.1f} s {trial['name']}: {json.dumps(outcome)}",
+            results[trial['run_dir']] = outcome  # names repeat across sweeps (seed1, ...)
+            print(f"{time.monotonic() - start:7.1f} s {trial['run_dir']}: {json.dumps(outcome)}",
                   flush=True)
 
     threads = [threading.Thread(target=one, args=(t,), daemon=True) for t in trials]
-    print(f'{len(threads)} trials of {args.sweep_dir} at once', flush=True)
+    names = ', '.join(str(d) for d in args.sweep_dirs)
+    print(f'{len(threads)} trials of {names} at once', flush=True)
     for thread in threads:
         thread.start()
         time.sleep(0.5)  # their children start one at a time (fork beside threads)

@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # On the lent machine: install the carried wheels (.whl) in a venv beside the image's torch,
-# run the sweep runs/$1's training trials at once (run_sweep.py), stopping them at $2 seconds so
-# that they save, then pack runs/$1 (without models, replay buffers and frames) into $OUT.
-#   bash tools/device/screen.sh NAME STOP_SECONDS
+# run the training trials of the sweeps runs/NAME (one or several, comma-separated) all at once
+# (run_sweep.py), stopping them at STOP_SECONDS so that they save, then pack each runs/NAME
+# (without models, replay buffers and frames) into $OUT/NAME.tgz.
+#   bash tools/device/screen.sh NAME[,NAME2...] STOP_SECONDS
 set -uo pipefail
-name=$1; stop=${2:-0}
+IFS=, read -r -a names <<< "$1"; stop=${2:-0}
 start=$SECONDS
 # EGL's loader (libglvnd), which the image lacks: `apt-get download libegl1 libglvnd0 ...` into .gl
 for f in .gl/*.deb; do [ -e "$f" ] && dpkg -x "$f" /; done; ldconfig
@@ -26,10 +27,12 @@ export MUJOCO_GL=egl PYTHONUNBUFFERED=1
 nvidia-smi --query-gpu=name,memory.used --format=csv,noheader
 /tmp/venv/bin/python -c 'import rclpy, mujoco, torch, stable_baselines3, nav_gym.training.trainer; print("imports ok, cuda", torch.cuda.is_available())
 c = mujoco.GLContext(64, 64); c.make_current(); print("EGL ok")' || exit 1
-/tmp/venv/bin/python tools/device/run_sweep.py "runs/$name" --stop-after "$stop"
+/tmp/venv/bin/python tools/device/run_sweep.py "${names[@]/#/runs/}" --stop-after "$stop"
 code=$?
 echo "# trials: exit $code after $((SECONDS - start)) s"
-tar --exclude='*replay_buffer*' --exclude='*_frames.npz' --exclude='*.zip' -czf "$OUT/$name.tgz" \
-    -C runs "$name"
+for name in "${names[@]}"; do
+    tar --exclude='*replay_buffer*' --exclude='*_frames.npz' --exclude='*.zip' \
+        -czf "$OUT/$name.tgz" -C runs "$name"
+done
 ls -la "$OUT"
 exit $code

@@ -41,18 +41,41 @@ from nav_sim.ros.sim_graph import full_name
 
 RECHECK_S = 1.0    # how often the sim looks for claims whose publisher has gone
 FRESH_S = 5.0      # a claim just heard counts as live before the graph shows its publisher
+#: ... and this long while the graph shows claim publishers whose node it cannot name yet
+SETTLE_S = 30.0
+#: the node name the rmw gives an endpoint before its participant has said which node owns it
+UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'
+
+
+def claim_is_live(node: str, live: set[str], seen: set[str], heard: dict[str, float],
+                  now: float, settling: bool = False) -> bool:
+    """Tell whether ``node``'s claim still stands.
+
+    A claim is live while its node publishes claims (``live``), and dead once the graph has
+    shown that node (``seen``) and shows it no longer.  One whose publisher the graph has not
+    named yet is live for FRESH_S after it was heard: discovery may show it a moment later.  On
+    a loaded machine the node that owns an endpoint can be named much later than the endpoint
+    appears (the rmw shows it as ``UNKNOWN_NODE`` meanwhile); while it does (``settling``), an
+    unnamed claim stays live up to SETTLE_S, so that a claim is never dropped for slow discovery
+    while its client holds the sim.
+    """
+    if node in live:
+        return True
+    if node in seen:
+        return False
+    age = now - heard.get(node, -1e18)
+    return age < FRESH_S or (settling and age < SETTLE_S)
 
 
 def holder_of(claims: dict[str, dict[str, Any]], live: set[str], seen: set[str],
-              heard: dict[str, float], now: float) -> dict[str, Any] | None:
+              heard: dict[str, float], now: float,
+              settling: bool = False) -> dict[str, Any] | None:
     """Return the claim that holds the sim: the earliest live one (None without any).
 
-    A claim is live while its node publishes claims (``live``).  One whose publisher the graph
-    has not shown yet (not in ``seen``) is live for FRESH_S after it was heard: discovery may
-    show it a moment later.  Ties go to the node name.
+    :func:`claim_is_live` says which claims are live; ties go to the node name.
     """
     alive = [claim for node, claim in claims.items()
-             if node in live or (node not in seen and now - heard.get(node, -1e18) < FRESH_S)]
+             if claim_is_live(node, live, seen, heard, now, settling)]
     return min(alive, key=lambda c: (c.get('since_ns', 0), c['node'])) if alive else None
 
 
@@ -90,16 +113,18 @@ class ClaimArbiter:
     def update(self) -> None:
         """Decide the holder again (a claim withdrawn, a client gone) and publish a change."""
         topic = self.node.resolve_topic_name(CLAIM_TOPIC)
-        live = {full_name(i.node_namespace, i.node_name)
-                for i in self.node.get_publishers_info_by_topic(topic)}
+        publishers = self.node.get_publishers_info_by_topic(topic)
+        live = {full_name(i.node_namespace, i.node_name) for i in publishers
+                if i.node_name != UNKNOWN_NODE}
+        settling = any(i.node_name == UNKNOWN_NODE for i in publishers)  # slow discovery
         now = time.monotonic()
         self.seen |= live & set(self.claims)
-        for node in [n for n in self.claims if n not in live and (
-                n in self.seen or now - self.heard.get(n, 0.0) >= FRESH_S)]:
+        for node in [n for n in self.claims
+                     if not claim_is_live(n, live, self.seen, self.heard, now, settling)]:
             del self.claims[node]  # its client has gone: its claim with it
             self.seen.discard(node)
             self.heard.pop(node, None)
-        self.holder = holder_of(self.claims, live, self.seen, self.heard, now)
+        self.holder = holder_of(self.claims, live, self.seen, self.heard, now, settling)
         text = json.dumps(self.holder or {})
         if text != self._published:
             self._pub.publish(String(data=text))

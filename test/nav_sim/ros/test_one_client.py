@@ -2,21 +2,24 @@
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
 import sys
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 from rclpy.executors import SingleThreadedExecutor
 from sensor_msgs.msg import Image
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from helpers import interrupt, wait_until
 from nav_sim import interface
 from nav_sim.errors import SimInUseError
-from nav_sim.ros import qos
+from nav_sim.ros import claim, qos
 from nav_sim.ros.bare import own_node
 from nav_sim.ros.client import SimClient
 from nav_sim.ros.process import SimProcess
@@ -25,33 +28,50 @@ TRAIN = str(Path(sys.prefix) / 'bin' / 'nav-gym-train')
 
 
 def test_a_second_trainer_is_refused_at_once_while_the_first_trains_on(tmp_path, namespace):
+    # each run writes to files, never to a pipe that nobody reads while it trains, so that a
+    # failed wait can say what each run was doing
+    first = second = None
+    files = {name: (tmp_path / f'{name}.out', tmp_path / f'{name}.err')
+             for name in ('first', 'second')}
+
+    def train(name: str, *settings: str) -> subprocess.Popen:
+        out, err = files[name]
+        with out.open('w') as stdout, err.open('w') as stderr:
+            return subprocess.Popen(
+                [TRAIN, '--sim', 'attach', '--namespace', namespace, '--runs-dir',
+                 str(tmp_path), '--run-name', name, '--buffer-size', '500', '--sim-timeout',
+                 '30', *settings], stdout=stdout, stderr=stderr, text=True)
+
+    def runs() -> str:
+        """Each run's state and the end of its output: what a failed wait reports."""
+        lines = []
+        for name, run in (('first', first), ('second', second)):
+            state = 'not started' if run is None else (
+                'running' if run.poll() is None else f'exit {run.returncode}')
+            out, err = (path.read_text()[-2000:] if path.exists() else '' for path in files[name])
+            lines.append(f'{name}: {state}\n  stdout: {out!r}\n  stderr: {err!r}')
+        return '\n'.join(lines)
+
     with SimProcess(namespace, {}) as sim:
         observer = Observer(namespace)
-        first = second = None
         try:
-            first = subprocess.Popen(
-                [TRAIN, '--sim', 'attach', '--namespace', namespace, '--runs-dir',
-                 str(tmp_path), '--run-name', 'first', '--total-timesteps', '100000',
-                 '--learning-starts', '60', '--checkpoint-freq', '100000', '--buffer-size',
-                 '500', '--sim-timeout', '30'],
-                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            first = train('first', '--total-timesteps', '100000', '--learning-starts', '60',
+                          '--checkpoint-freq', '100000')
             # an observer (a plain subscriber) hears the sim all along, never refused.  A
             # lockstep sim publishes only when its client steps it: the first image says the
             # first run holds the sim (its claim comes before its first step)
             observer.spin_until(lambda: observer.images > 0 or first.poll() is not None, 120.0,
-                                'the first run stepping the sim')
+                                'the first run stepping the sim', runs)
+            assert first.poll() is None, runs()
             started = time.monotonic()
-            second = subprocess.Popen(
-                [TRAIN, '--sim', 'attach', '--namespace', namespace, '--runs-dir',
-                 str(tmp_path), '--run-name', 'second', '--total-timesteps', '120',
-                 '--buffer-size', '500', '--sim-timeout', '30'], stdout=subprocess.PIPE,
-                stderr=subprocess.PIPE, text=True)
-            observer.spin_until(lambda: second.poll() is not None, 120.0, 'the second run')
+            second = train('second', '--total-timesteps', '120')
+            observer.spin_until(lambda: second.poll() is not None, 120.0, 'the second run', runs)
             refused_in = time.monotonic() - started
-            second_err = second.communicate(timeout=60)[1]
             images = observer.images  # still heard, and the first run still steps the sim
-            observer.spin_until(lambda: observer.images > images, 60.0, 'the first run going on')
+            observer.spin_until(lambda: observer.images > images or first.poll() is not None,
+                                60.0, 'the first run going on', runs)
             still_training = first.poll() is None
+            report = runs()
         finally:
             try:
                 observer.close()
@@ -59,16 +79,80 @@ def test_a_second_trainer_is_refused_at_once_while_the_first_trains_on(tmp_path,
                 if second is not None and second.poll() is None:
                     interrupt(second, timeout=30)
                 if first is not None:
-                    code, output = interrupt(first, timeout=120)
+                    code = interrupt(first, timeout=120)[0]
         assert sim.alive()
-    assert second.returncode == 1 and refused_in < 20.0, second_err
+    second_err = files['second'][1].read_text()
+    assert second.returncode == 1 and refused_in < 20.0, report
     (line,) = second_err.strip().splitlines()
     assert line.startswith(f"nav-gym-train: error: the sim in namespace '{namespace}' is in "
                            'use:'), line
     assert 'one controlling client at a time' in line
     # the observer heard images before the second run and after its refusal (the waits above)
-    assert still_training and code == 130 and 'interrupted at step' in output, output
+    output = files['first'][0].read_text() + files['first'][1].read_text()
+    assert still_training and code == 130 and 'interrupted at step' in output, \
+        f'{report}\n{output}'
     assert 'Traceback' not in output
+
+
+class Graph:
+    """The parts of an rclpy node that the sim's claim arbiter uses, its graph set by hand."""
+
+    def __init__(self) -> None:
+        self.publishers: list[SimpleNamespace] = []  # of the claim topic, as the rmw shows them
+        self.deliver = None  # the arbiter's claim callback
+
+    def create_publisher(self, *args) -> SimpleNamespace:
+        return SimpleNamespace(publish=lambda msg: None)
+
+    def create_subscription(self, msg_type, topic, callback, qos_profile) -> None:
+        self.deliver = lambda claim_: callback(String(data=json.dumps(claim_)))
+
+    def create_timer(self, *args) -> None:
+        return None
+
+    def resolve_topic_name(self, name: str) -> str:
+        return f'/ns/{name}'
+
+    def get_publishers_info_by_topic(self, topic: str) -> list[SimpleNamespace]:
+        return list(self.publishers)
+
+
+def test_a_claim_stands_while_discovery_has_not_named_its_node_and_falls_when_it_goes(
+        monkeypatch):
+    now = [1000.0]
+    monkeypatch.setattr(claim.time, 'monotonic', lambda: now[0])
+    graph = Graph()
+    arbiter = claim.ClaimArbiter(graph)
+    first = {'node': '/ns/first', 'host': 'h', 'pid': 1, 'since_ns': 1}
+    unnamed = SimpleNamespace(node_name=claim.UNKNOWN_NODE,
+                              node_namespace='_NODE_NAMESPACE_UNKNOWN_')
+    named = SimpleNamespace(node_name='first', node_namespace='/ns')
+
+    # the probe sees a drop: a claim whose publisher the graph never shows falls after FRESH_S
+    graph.deliver(first)
+    assert arbiter.holder == first
+    now[0] += claim.FRESH_S + 1
+    arbiter.update()
+    assert arbiter.holder is None
+
+    # on a loaded machine the endpoint shows before its node is named: the claim stands
+    graph.publishers = [unnamed]
+    graph.deliver(first)
+    now[0] += claim.FRESH_S + 1
+    arbiter.update()
+    assert arbiter.holder == first
+    graph.deliver({'node': '/ns/second', 'host': 'h', 'pid': 2, 'since_ns': 2})
+    assert arbiter.holder == first  # so a second client is refused
+    graph.publishers = [unnamed, named]
+    arbiter.update()
+    assert arbiter.holder == first
+    # ... and falls at once when its named publisher goes (its client has closed)
+    graph.publishers = [unnamed]
+    arbiter.update()
+    assert arbiter.holder['node'] == '/ns/second'  # still unnamed, within SETTLE_S
+    now[0] += claim.SETTLE_S
+    arbiter.update()
+    assert arbiter.holder is None  # an endpoint never named holds no claim for ever
 
 
 class Observer:
@@ -85,11 +169,11 @@ class Observer:
     def _on_image(self, msg: Image) -> None:
         self.images += 1
 
-    def spin_until(self, done, timeout: float, what: str) -> None:
+    def spin_until(self, done, timeout: float, what: str, details=None) -> None:
         def spun():
             self.executor.spin_once(timeout_sec=0.02)
             return done()
-        wait_until(spun, timeout, what, interval=0)
+        wait_until(spun, timeout, what, interval=0, details=details)
 
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=1.0)
