@@ -32,12 +32,13 @@ STOPPED = 2
 
 
 def main() -> int:
-    """Run the sweep's unfinished training trials; return 0 if all finished, 2 if stopped."""
+    """Run the sweeps' unfinished training trials; return 0 if all finished, 2 if stopped."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('sweep_dirs', type=Path, nargs='+', metavar='SWEEP_DIR')
     parser.add_argument('--stop-after', type=float, default=0)
     args = parser.parse_args()
-    trials = [t for sweep_dir in args.sweep_dirs for t in load_spec(sweep_dir).trials()
+    sweep_dirs = list(dict.fromkeys(d.resolve() for d in args.sweep_dirs))  # each once
+    trials = [t for sweep_dir in sweep_dirs for t in load_spec(sweep_dir).trials()
               if t['kind'] == 'train' and not trial_finished(t)]
     results: dict[str, object] = {}
     lock = threading.Lock()
@@ -58,7 +59,7 @@ def main() -> int:
                   flush=True)
 
     threads = [threading.Thread(target=one, args=(t,), daemon=True) for t in trials]
-    names = ', '.join(str(d) for d in args.sweep_dirs)
+    names = ', '.join(str(d) for d in sweep_dirs)
     print(f'{len(threads)} trials of {names} at once', flush=True)
     for thread in threads:
         thread.start()

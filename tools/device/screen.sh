@@ -5,7 +5,11 @@
 # (without models, replay buffers and frames) into $OUT/NAME.tgz.
 #   bash tools/device/screen.sh NAME[,NAME2...] STOP_SECONDS
 set -uo pipefail
-IFS=, read -r -a names <<< "$1"; stop=${2:-0}
+IFS=, read -r -a names <<< "${1:-}"; stop=${2:-0}
+for name in "${names[@]}"; do
+    [ -n "$name" ] && [ -d "runs/$name" ] || { echo "screen.sh: no sweep runs/$name" >&2; exit 1; }
+done
+[ ${#names[@]} -gt 0 ] || { echo 'usage: screen.sh NAME[,NAME2...] STOP_SECONDS' >&2; exit 1; }
 start=$SECONDS
 # EGL's loader (libglvnd), which the image lacks: `apt-get download libegl1 libglvnd0 ...` into .gl
 for f in .gl/*.deb; do [ -e "$f" ] && dpkg -x "$f" /; done; ldconfig

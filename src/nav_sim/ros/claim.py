@@ -20,6 +20,8 @@ A claim ends with its publisher: at once when its client closes or its process e
 process that was killed (SIGKILL, a crash) when DDS declares its participant gone, after Fast
 DDS's participant lease (20 s by default; about 3 s on one machine in our tests).  The sim looks
 again every :data:`RECHECK_S`.  To free a sim held by a crashed client at once, restart the sim.
+Claims are told apart by node, host and process, so two processes whose clients share a node
+name are still two claims.  The sim logs every change of holder and every claim it drops.
 """
 
 from __future__ import annotations
@@ -37,46 +39,47 @@ from std_msgs.msg import String
 from nav_sim.errors import SimInUseError, SimUnavailableError
 from nav_sim.interface import CLAIM_TOPIC, CONTROLLER_TOPIC
 from nav_sim.ros import qos
-from nav_sim.ros.sim_graph import full_name
+from nav_sim.ros.sim_graph import UNKNOWN_NODE, full_name
 
 RECHECK_S = 1.0    # how often the sim looks for claims whose publisher has gone
-FRESH_S = 5.0      # a claim just heard counts as live before the graph shows its publisher
-#: ... and this long while the graph shows claim publishers whose node it cannot name yet
-SETTLE_S = 30.0
-#: the node name the rmw gives an endpoint before its participant has said which node owns it
-UNKNOWN_NODE = '_NODE_NAME_UNKNOWN_'
+FRESH_S = 5.0      # a claim just heard counts as live before the graph names its publisher
+SETTLE_S = 30.0    # ... the holder's, while the graph shows claim publishers it cannot name
+
+Key = tuple[str, str, int]  # a claim's node, host and process: names may repeat across processes
 
 
-def claim_is_live(node: str, live: set[str], seen: set[str], heard: dict[str, float],
-                  now: float, settling: bool = False) -> bool:
-    """Tell whether ``node``'s claim still stands.
+def key_of(claim: dict[str, Any]) -> Key:
+    """Return the key that tells one client's claim from another's."""
+    return claim['node'], str(claim.get('host')), int(claim.get('pid') or 0)
+
+
+def claim_is_live(node: str, seen: bool, age: float, live: set[str], settling: bool = False,
+                  holding: bool = False) -> bool:
+    """Tell whether the claim of ``node``, heard ``age`` seconds ago, still stands.
 
     A claim is live while its node publishes claims (``live``), and dead once the graph has
-    shown that node (``seen``) and shows it no longer.  One whose publisher the graph has not
-    named yet is live for FRESH_S after it was heard: discovery may show it a moment later.  On
-    a loaded machine the node that owns an endpoint can be named much later than the endpoint
-    appears (the rmw shows it as ``UNKNOWN_NODE`` meanwhile); while it does (``settling``), an
-    unnamed claim stays live up to SETTLE_S, so that a claim is never dropped for slow discovery
-    while its client holds the sim.
+    shown its node (``seen``) and shows it no longer.  One whose publisher the graph has not
+    named yet is live for FRESH_S after it was heard: discovery may name it a moment later.  On
+    a loaded machine the graph can show an endpoint some seconds before it names the node that
+    owns it (the rmw's ``UNKNOWN_NODE``).  While it does (``settling``), the claim that holds
+    the sim (``holding``) stays live up to SETTLE_S, so that slow discovery does not free a sim
+    that its client is stepping.  Other unnamed claims (refused clients, which withdraw at once)
+    keep FRESH_S, so that they never stand in for a holder that has gone.
     """
     if node in live:
         return True
-    if node in seen:
+    if seen:
         return False
-    age = now - heard.get(node, -1e18)
-    return age < FRESH_S or (settling and age < SETTLE_S)
+    return age < FRESH_S or (settling and holding and age < SETTLE_S)
 
 
-def holder_of(claims: dict[str, dict[str, Any]], live: set[str], seen: set[str],
-              heard: dict[str, float], now: float,
-              settling: bool = False) -> dict[str, Any] | None:
-    """Return the claim that holds the sim: the earliest live one (None without any).
+def holder_of(claims: dict[Key, dict[str, Any]]) -> dict[str, Any] | None:
+    """Return the claim that holds the sim: the earliest one (None without any).
 
-    :func:`claim_is_live` says which claims are live; ties go to the node name.
+    Ties go to the node name.  ``claims`` are the live ones (:func:`claim_is_live`).
     """
-    alive = [claim for node, claim in claims.items()
-             if claim_is_live(node, live, seen, heard, now, settling)]
-    return min(alive, key=lambda c: (c.get('since_ns', 0), c['node'])) if alive else None
+    return min(claims.values(), key=lambda c: (c.get('since_ns', 0), c['node']),
+               default=None)
 
 
 def _parse(msg: String) -> dict[str, Any] | None:
@@ -93,9 +96,9 @@ class ClaimArbiter:
     def __init__(self, node: Node) -> None:
         """Subscribe to the claims and publish the holder (latched) from now on."""
         self.node = node
-        self.claims: dict[str, dict[str, Any]] = {}
-        self.heard: dict[str, float] = {}
-        self.seen: set[str] = set()  # claiming nodes the graph has shown
+        self.claims: dict[Key, dict[str, Any]] = {}
+        self.heard: dict[Key, float] = {}
+        self.seen: set[Key] = set()  # claims whose node the graph has named
         self.holder: dict[str, Any] | None = None
         self._published: str | None = None
         self._pub = node.create_publisher(String, CONTROLLER_TOPIC, qos.LATCHED)
@@ -106,8 +109,11 @@ class ClaimArbiter:
     def _on_claim(self, msg: String) -> None:
         claim = _parse(msg)
         if claim is not None:
-            self.claims[claim['node']] = claim
-            self.heard[claim['node']] = time.monotonic()
+            key = key_of(claim)
+            if self.claims.get(key) != claim:  # a new claim, or one made again
+                self.seen.discard(key)
+            self.claims[key] = claim
+            self.heard[key] = time.monotonic()
             self.update()
 
     def update(self) -> None:
@@ -116,19 +122,29 @@ class ClaimArbiter:
         publishers = self.node.get_publishers_info_by_topic(topic)
         live = {full_name(i.node_namespace, i.node_name) for i in publishers
                 if i.node_name != UNKNOWN_NODE}
-        settling = any(i.node_name == UNKNOWN_NODE for i in publishers)  # slow discovery
+        settling = any(i.node_name == UNKNOWN_NODE for i in publishers)  # not all named yet
         now = time.monotonic()
-        self.seen |= live & set(self.claims)
-        for node in [n for n in self.claims
-                     if not claim_is_live(n, live, self.seen, self.heard, now, settling)]:
-            del self.claims[node]  # its client has gone: its claim with it
-            self.seen.discard(node)
-            self.heard.pop(node, None)
-        self.holder = holder_of(self.claims, live, self.seen, self.heard, now, settling)
+        holding = key_of(self.holder) if self.holder else None
+        for key, claim in list(self.claims.items()):
+            if claim['node'] in live:
+                self.seen.add(key)
+            seen, age = key in self.seen, now - self.heard[key]
+            if not claim_is_live(claim['node'], seen, age, live, settling, key == holding):
+                del self.claims[key]  # its client has gone: its claim with it
+                self.seen.discard(key)
+                self.heard.pop(key, None)
+                why = ('its node left the graph' if seen
+                       else f'the graph did not name its node within {age:.0f} s')
+                self.node.get_logger().info(
+                    f'the claim of {claim["node"]} (process {claim.get("pid")}) ended: {why}')
+        self.holder = holder_of(self.claims)
         text = json.dumps(self.holder or {})
         if text != self._published:
             self._pub.publish(String(data=text))
             self._published = text
+            self.node.get_logger().info(
+                f'held by {self.holder["node"]} (process {self.holder.get("pid")})'
+                if self.holder else 'held by no client')
 
 
 class Claim:

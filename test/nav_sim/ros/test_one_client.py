@@ -23,6 +23,7 @@ from nav_sim.ros import claim, qos
 from nav_sim.ros.bare import own_node
 from nav_sim.ros.client import SimClient
 from nav_sim.ros.process import SimProcess
+from nav_sim.ros.sim_graph import UNKNOWN_NODE
 
 TRAIN = str(Path(sys.prefix) / 'bin' / 'nav-gym-train')
 
@@ -50,6 +51,7 @@ def test_a_second_trainer_is_refused_at_once_while_the_first_trains_on(tmp_path,
                 'running' if run.poll() is None else f'exit {run.returncode}')
             out, err = (path.read_text()[-2000:] if path.exists() else '' for path in files[name])
             lines.append(f'{name}: {state}\n  stdout: {out!r}\n  stderr: {err!r}')
+        lines.append(f'sim: {sim.output()[-3000:]!r}')  # its claims and holders, among others
         return '\n'.join(lines)
 
     with SimProcess(namespace, {}) as sim:
@@ -100,6 +102,7 @@ class Graph:
     def __init__(self) -> None:
         self.publishers: list[SimpleNamespace] = []  # of the claim topic, as the rmw shows them
         self.deliver = None  # the arbiter's claim callback
+        self.log: list[str] = []  # what the arbiter logged
 
     def create_publisher(self, *args) -> SimpleNamespace:
         return SimpleNamespace(publish=lambda msg: None)
@@ -116,43 +119,85 @@ class Graph:
     def get_publishers_info_by_topic(self, topic: str) -> list[SimpleNamespace]:
         return list(self.publishers)
 
+    def get_logger(self) -> SimpleNamespace:
+        return SimpleNamespace(info=self.log.append)
 
-def test_a_claim_stands_while_discovery_has_not_named_its_node_and_falls_when_it_goes(
-        monkeypatch):
-    now = [1000.0]
-    monkeypatch.setattr(claim.time, 'monotonic', lambda: now[0])
+
+UNNAMED = SimpleNamespace(node_name=UNKNOWN_NODE, node_namespace='_NODE_NAMESPACE_UNKNOWN_')
+
+
+def named(name: str) -> SimpleNamespace:
+    return SimpleNamespace(node_name=name, node_namespace='/ns')
+
+
+def arbiter_at(monkeypatch, now: list[float]) -> tuple[claim.ClaimArbiter, Graph]:
+    """Return a claim arbiter on a hand-set graph, its clock ``now[0]``, and the graph."""
+    monkeypatch.setattr(claim, 'time', SimpleNamespace(monotonic=lambda: now[0]))
     graph = Graph()
-    arbiter = claim.ClaimArbiter(graph)
-    first = {'node': '/ns/first', 'host': 'h', 'pid': 1, 'since_ns': 1}
-    unnamed = SimpleNamespace(node_name=claim.UNKNOWN_NODE,
-                              node_namespace='_NODE_NAMESPACE_UNKNOWN_')
-    named = SimpleNamespace(node_name='first', node_namespace='/ns')
+    return claim.ClaimArbiter(graph), graph
 
+
+def test_the_holders_claim_stands_while_discovery_has_not_named_its_node(monkeypatch):
+    now = [1000.0]
+    arbiter, graph = arbiter_at(monkeypatch, now)
+    first = {'node': '/ns/first', 'host': 'h', 'pid': 1, 'since_ns': 1}
     # the probe sees a drop: a claim whose publisher the graph never shows falls after FRESH_S
     graph.deliver(first)
     assert arbiter.holder == first
     now[0] += claim.FRESH_S + 1
     arbiter.update()
     assert arbiter.holder is None
+    assert graph.log[-2:] == ['the claim of /ns/first (process 1) ended: the graph did not name '
+                              'its node within 6 s', 'held by no client']
 
-    # on a loaded machine the endpoint shows before its node is named: the claim stands
-    graph.publishers = [unnamed]
+    # on a loaded machine the graph shows the endpoint before it names its node: the holder's
+    # claim stands, and a second client is refused meanwhile
+    graph.publishers = [UNNAMED]
     graph.deliver(first)
     now[0] += claim.FRESH_S + 1
     arbiter.update()
     assert arbiter.holder == first
     graph.deliver({'node': '/ns/second', 'host': 'h', 'pid': 2, 'since_ns': 2})
-    assert arbiter.holder == first  # so a second client is refused
-    graph.publishers = [unnamed, named]
+    assert arbiter.holder == first
+    graph.publishers = [UNNAMED, named('first')]
     arbiter.update()
     assert arbiter.holder == first
     # ... and falls at once when its named publisher goes (its client has closed)
-    graph.publishers = [unnamed]
+    graph.publishers = [UNNAMED]
     arbiter.update()
-    assert arbiter.holder['node'] == '/ns/second'  # still unnamed, within SETTLE_S
+    assert arbiter.holder['node'] == '/ns/second'
+    assert 'the claim of /ns/first (process 1) ended: its node left the graph' in graph.log
+    # an endpoint that is never named holds the sim no longer than SETTLE_S
     now[0] += claim.SETTLE_S
     arbiter.update()
-    assert arbiter.holder is None  # an endpoint never named holds no claim for ever
+    assert arbiter.holder is None
+
+
+def test_a_refused_claim_never_stands_in_for_a_holder_that_has_gone(monkeypatch):
+    now = [1000.0]
+    arbiter, graph = arbiter_at(monkeypatch, now)
+    holder = {'node': '/ns/holder', 'host': 'h', 'pid': 1, 'since_ns': 1}
+    graph.publishers = [named('holder')]
+    graph.deliver(holder)
+    # a late client is refused and withdraws before the graph names it
+    graph.publishers = [named('holder'), UNNAMED]
+    graph.deliver({'node': '/ns/late', 'host': 'h', 'pid': 2, 'since_ns': 2})
+    assert arbiter.holder == holder
+    graph.publishers = [named('holder')]
+    now[0] += claim.FRESH_S + 1
+    # the holder goes, and the next client claims while the graph has not named it yet
+    graph.publishers = [UNNAMED]
+    graph.deliver({'node': '/ns/next', 'host': 'h', 'pid': 3, 'since_ns': 3})
+    assert arbiter.holder['node'] == '/ns/next'
+
+
+def test_clients_of_two_processes_with_one_node_name_are_two_claims(monkeypatch):
+    arbiter, graph = arbiter_at(monkeypatch, [1000.0])
+    graph.publishers = [named('visnav_closed_loop'), named('visnav_closed_loop')]
+    first = {'node': '/ns/visnav_closed_loop', 'host': 'h', 'pid': 1, 'since_ns': 1}
+    graph.deliver(first)
+    graph.deliver({**first, 'pid': 2, 'since_ns': 2})
+    assert arbiter.holder == first  # so the second process is refused
 
 
 class Observer:
