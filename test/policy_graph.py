@@ -60,6 +60,18 @@ class Graph:
     def publish(self, msg: Image) -> None:
         self.camera.publish(msg)
 
+    def stream(self, msg: Image, done, timeout: float, what: str, details=None):  # noqa: ANN201
+        """Publish ``msg`` again and again, as a camera would, until ``done()``; return that.
+
+        For a wait on a decision: the node stops on an image older than ``image_timeout`` (two
+        periods by default, 0.1 s at a 0.05-s period), which one image published once outlives
+        on a loaded machine.  Not for a node with memory, whose history each copy would enter.
+        """
+        def shown():  # noqa: ANN202
+            self.publish(msg)
+            return done()
+        return self.spin_until(shown, timeout, what, details)
+
     def decision(self, msg: JointState) -> dict[str, float]:
         return dict(zip(msg.name, msg.position, strict=True))
 

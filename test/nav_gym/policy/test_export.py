@@ -246,12 +246,11 @@ def test_the_node_runs_the_export_without_torch_and_sends_twist_stamped(tmp_path
                                    'camera_optical_frame')
         sim.close()
 
-        def decided():
-            listener.camera.publish(image)
-            return next((m for m in reversed(listener.decisions)
-                         if ros_msgs.stamp_to_ns(m.header.stamp) == 4_000_000_000), None)
-        decision = dict(zip(*(lambda m: (m.name, m.position))(
-            listener.spin_until(decided, 20.0, 'a decision on the image')), strict=True))
+        decision = listener.decision(listener.stream(
+            image, lambda: next((m for m in reversed(listener.decisions)
+                                 if ros_msgs.stamp_to_ns(m.header.stamp) == 4_000_000_000
+                                 and listener.decision(m)['action'] >= 0), None),
+            20.0, 'a decision on the image'))
         q_values = [decision['q_left'], decision['q_forward'], decision['q_right']]
         assert all(math.isfinite(q) for q in q_values)
         assert decision['action'] == int(np.argmax(q_values))

@@ -100,12 +100,9 @@ def test_the_observation_is_byte_identical_to_the_envs_in_every_encoding_size_an
             stamp += 1_000_000
             msg = encoded(rgb, encoding, stamp, pad)
 
-            def observed(m=msg, s=stamp):
-                graph.publish(m)  # again, as a camera would: best effort may lose one
-                return next((o for o in graph.observations
-                             if ros_msgs.stamp_to_ns(o.header.stamp) == s), None)
-            got = graph.spin_until(observed, 10.0,
-                                   f'the observation of a {encoding} image (pad {pad})')
+            got = graph.stream(msg, lambda s=stamp: next(
+                (o for o in graph.observations if ros_msgs.stamp_to_ns(o.header.stamp) == s),
+                None), 10.0, f'the observation of a {encoding} image (pad {pad})')
             node_obs = np.frombuffer(got.data, np.uint8).reshape(84, 84, 3).transpose(2, 0, 1)
             env_obs, _ = image_msg_to_observation(msg)  # what the env makes of the same image
             assert np.array_equal(node_obs, env_obs), (encoding, pad, rgb.shape)
@@ -122,9 +119,9 @@ def test_a_stale_camera_stops_the_robot_and_says_so_once(graph, namespace, frame
     try:
         graph.connected(details=lambda: output(process))
         assert graph.decision(graph.decisions[-1])['action'] == -1  # no image yet: stop
-        graph.publish(encoded(frames[0], 'rgb8', 5_000_000_000))
-        graph.spin_until(lambda: graph.decision(graph.decisions[-1])['action'] >= 0, 10.0,
-                         'a decision on the image')
+        graph.stream(encoded(frames[0], 'rgb8', 5_000_000_000),
+                     lambda: graph.decision(graph.decisions[-1])['action'] >= 0, 10.0,
+                     'a decision on the image')
         moving = graph.twists[-1]
         assert (moving.linear.x, moving.angular.z) != (0.0, 0.0)
         started = time.monotonic()
@@ -168,9 +165,9 @@ def test_sigint_and_sigterm_leave_a_zero_twist_as_the_last_command(graph, namesp
                            '-p', 'period:=0.05')
     try:
         graph.connected(details=lambda: output(process))
-        graph.publish(encoded(frames[0], 'rgb8', 3_000_000_000))
-        graph.spin_until(lambda: graph.twists and graph.twists[-1].angular.z != 0.0, 10.0,
-                         'a moving command')
+        graph.stream(encoded(frames[0], 'rgb8', 3_000_000_000),
+                     lambda: graph.twists and graph.twists[-1].angular.z != 0.0, 10.0,
+                     'a moving command')
         process.send_signal(sig)
         process.wait(15)
         graph.spin_until(lambda: graph.twists[-1].angular.z == 0.0, 5.0, 'the zero Twist')
@@ -220,9 +217,9 @@ def test_remapping_a_params_file_and_runtime_parameters(tmp_path, namespace, fra
                            '-r', f'camera/image_raw:={namespace}/robot/camera/image')
     try:
         graph.connected(details=lambda: output(process))
-        graph.publish(encoded(frames[0], 'rgb8', 2_000_000_000))
-        graph.spin_until(lambda: graph.decision(graph.decisions[-1])['action'] >= 0, 10.0,
-                         'a decision on the remapped camera')
+        graph.stream(encoded(frames[0], 'rgb8', 2_000_000_000),
+                     lambda: graph.decision(graph.decisions[-1])['action'] >= 0, 10.0,
+                     'a decision on the remapped camera')
         from rcl_interfaces.srv import SetParameters
         from rclpy.parameter import Parameter
         client = graph.node.create_client(SetParameters,
@@ -255,10 +252,11 @@ def test_a_dqn_run_decides_with_its_q_values_and_its_runs_actions(tmp_path, name
                            '-p', 'period:=0.05')
     try:
         graph.connected(details=lambda: output(process))
-        graph.publish(encoded(frames[1], 'bgr8', 4_000_000_000))
-        decision = graph.decision(graph.spin_until(
+        decision = graph.decision(graph.stream(
+            encoded(frames[1], 'bgr8', 4_000_000_000),
             lambda: next((d for d in reversed(graph.decisions)
-                          if ros_msgs.stamp_to_ns(d.header.stamp) == 4_000_000_000), None),
+                          if ros_msgs.stamp_to_ns(d.header.stamp) == 4_000_000_000
+                          and graph.decision(d)['action'] >= 0), None),
             20.0, 'a decision on the image'))
         q_values = [decision['q_left'], decision['q_forward'], decision['q_right']]
         assert all(math.isfinite(q) for q in q_values)
