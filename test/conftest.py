@@ -23,6 +23,8 @@ os.environ['ROS_DOMAIN_ID'] = str(_DOMAIN.domain_id)
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)
 os.environ.setdefault('MUJOCO_GL', 'egl')
+# a child that crashes (SIGSEGV, SIGABRT) prints its Python stack into the output a test reports
+os.environ.setdefault('PYTHONFAULTHANDLER', '1')
 # The tests press Ctrl-C on commands as a terminal does.  Started as a background job of a
 # non-interactive shell (`nohup make test &`), this process inherits an ignored SIGINT and so
 # would every command it starts: a trainer started so ignores Ctrl-C (Python installs no

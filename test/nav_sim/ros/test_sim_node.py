@@ -171,7 +171,7 @@ def test_bad_velocities_are_contained(node):
     assert stopped == [0.0, 0.0]
     assert process.poll() is None
     code, output = interrupt(process)
-    assert code == 0
+    assert code == 0, output
     assert 'Traceback' not in output
     assert 'non-finite velocity command' in output and 'exceeds the wheel limit' in output
 
