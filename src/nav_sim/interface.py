@@ -21,7 +21,8 @@ CLOCK_TOPIC = '/clock'  # rosgraph_msgs/Clock, with publish_clock (global: ROS's
 
 #: std_msgs/String, latched: a controlling client's claim, JSON {node, host, pid, since_ns}
 CLAIM_TOPIC = 'sim_claim'
-#: std_msgs/String, latched, from the sim: the claim that holds it ({} while none; see
+#: std_msgs/String, latched, from the sim: the claim that holds it, and the keys of the claims
+#: it has heard (JSON {node, host, pid, since_ns, heard}; only heard while none holds it; see
 #: nav_sim.ros.claim)
 CONTROLLER_TOPIC = 'sim_controller'
 

@@ -5,8 +5,11 @@ that resets and steps a sim (:class:`nav_sim.ros.client.SimClient`: the env, the
 the demo) *claims* it when it attaches: it publishes, latched, on ``<ns>/sim_claim``
 (``std_msgs/String``) a JSON claim with its node, host, process id and the wall-clock time.
 The sim (:class:`ClaimArbiter`) hears every claim and publishes, latched, on
-``<ns>/sim_controller`` the claim that holds it: the earliest one whose publisher is still in
-the graph.  The client waits for that answer.  Its own claim, or one of its own process (the
+``<ns>/sim_controller`` the claim that holds it, with the keys of every claim it has heard
+(``heard``).  A claim that holds the sim holds it as long as its publisher is in the graph; a
+claim heard later never displaces it, even one stamped earlier (two clients started at once).
+Only a free sim goes to a claim: the earliest of those heard.  The client waits until the
+answer names its claim or lists it as heard.  Its own claim, or one of its own process (the
 validation checklist attaches a second env to its own sim), and it controls the sim.  Another
 process's claim, and it is refused at once with :class:`nav_sim.errors.SimInUseError` (one line
 naming the namespace and the holder) and withdraws its claim.  The holder is never disturbed.
@@ -53,33 +56,48 @@ def key_of(claim: dict[str, Any]) -> Key:
     return claim['node'], str(claim.get('host')), int(claim.get('pid') or 0)
 
 
-def claim_is_live(node: str, seen: bool, age: float, live: set[str], settling: bool = False,
+def claim_is_live(named: bool, seen: bool, age: float, settling: bool = False,
                   holding: bool = False) -> bool:
-    """Tell whether the claim of ``node``, heard ``age`` seconds ago, still stands.
+    """Tell whether a claim heard ``age`` seconds ago still stands.
 
-    A claim is live while its node publishes claims (``live``), and dead once the graph has
-    shown its node (``seen``) and shows it no longer.  One whose publisher the graph has not
-    named yet is live for FRESH_S after it was heard: discovery may name it a moment later.  On
-    a loaded machine the graph can show an endpoint some seconds before it names the node that
-    owns it (the rmw's ``UNKNOWN_NODE``).  While it does (``settling``), the claim that holds
-    the sim (``holding``) stays live up to SETTLE_S, so that slow discovery does not free a sim
-    that its client is stepping.  Other unnamed claims (refused clients, which withdraw at once)
-    keep FRESH_S, so that they never stand in for a holder that has gone.
+    A claim is live while the graph names its node among the claim publishers (``named``), and
+    dead once the graph has shown its node (``seen``) and shows it no longer.  One whose
+    publisher the graph has not named yet is live for FRESH_S after it was heard: discovery may
+    name it a moment later.  On a loaded machine the graph can show an endpoint some seconds
+    before it names the node that owns it (the rmw's ``UNKNOWN_NODE``).  While it does
+    (``settling``), the claim that holds the sim (``holding``) stays live up to SETTLE_S, so
+    that slow discovery does not free a sim that its client is stepping.  Other unnamed claims
+    (refused clients, which withdraw at once) keep FRESH_S, so that they never stand in for a
+    holder that has gone.
     """
-    if node in live:
+    if named:
         return True
     if seen:
         return False
     return age < FRESH_S or (settling and holding and age < SETTLE_S)
 
 
-def holder_of(claims: dict[Key, dict[str, Any]]) -> dict[str, Any] | None:
-    """Return the claim that holds the sim: the earliest one (None without any).
+def holder_of(claims: dict[Key, dict[str, Any]],
+              holding: Key | None = None) -> dict[str, Any] | None:
+    """Return the claim that holds the sim (None without any).
 
-    Ties go to the node name.  ``claims`` are the live ones (:func:`claim_is_live`).
+    The claim that holds it (key ``holding``) keeps it while it is among ``claims``, the live
+    ones (:func:`claim_is_live`): its client was told so and steps the sim.  A free sim goes to
+    the earliest claim, ties to the node name.
     """
+    if holding in claims:
+        return claims[holding]
     return min(claims.values(), key=lambda c: (c.get('since_ns', 0), c['node']),
                default=None)
+
+
+def settles(answer: dict[str, Any] | None, mine: dict[str, Any]) -> bool:
+    """Tell whether the sim's answer settles the claim ``mine``: it holds the sim, or was heard.
+
+    Heard and not the holder, the claim is refused, unless the holder is of its own process.
+    """
+    answer = answer or {}
+    return answer.get('node') == mine['node'] or list(key_of(mine)) in answer.get('heard', [])
 
 
 def _parse(msg: String) -> dict[str, Any] | None:
@@ -126,10 +144,11 @@ class ClaimArbiter:
         now = time.monotonic()
         holding = key_of(self.holder) if self.holder else None
         for key, claim in list(self.claims.items()):
-            if claim['node'] in live:
+            named = claim['node'] in live
+            if named:
                 self.seen.add(key)
             seen, age = key in self.seen, now - self.heard[key]
-            if not claim_is_live(claim['node'], seen, age, live, settling, key == holding):
+            if not claim_is_live(named, seen, age, settling, key == holding):
                 del self.claims[key]  # its client has gone: its claim with it
                 self.seen.discard(key)
                 self.heard.pop(key, None)
@@ -137,14 +156,16 @@ class ClaimArbiter:
                        else f'the graph did not name its node within {age:.0f} s')
                 self.node.get_logger().info(
                     f'the claim of {claim["node"]} (process {claim.get("pid")}) ended: {why}')
-        self.holder = holder_of(self.claims)
-        text = json.dumps(self.holder or {})
-        if text != self._published:
-            self._pub.publish(String(data=text))
-            self._published = text
+        self.holder = holder_of(self.claims, holding)
+        held = key_of(self.holder) if self.holder else None
+        if self._published is None or held != holding:
             self.node.get_logger().info(
                 f'held by {self.holder["node"]} (process {self.holder.get("pid")})'
                 if self.holder else 'held by no client')
+        text = json.dumps({**(self.holder or {}), 'heard': sorted(self.claims)})
+        if text != self._published:  # a new holder, or a claim heard or ended
+            self._pub.publish(String(data=text))
+            self._published = text
 
 
 class Claim:
@@ -180,7 +201,7 @@ class Claim:
         self._publisher = self.node.create_publisher(String, CLAIM_TOPIC, qos.LATCHED)
         self._publisher.publish(String(data=json.dumps(mine)))
         deadline = time.monotonic() + timeout
-        while not self._decided(mine):
+        while not settles(self.answer, mine):
             reason = abort() if abort is not None else None
             if reason:
                 self._withdraw()
@@ -201,15 +222,6 @@ class Claim:
                 'that one, or start another sim in its own namespace (a killed client releases '
                 'it within 20 s; docs/simulation.md)')
         self.mine = mine
-
-    def _decided(self, mine: dict[str, Any]) -> bool:
-        """Tell whether the sim's answer settles our claim: ours, ours to share, or earlier."""
-        answer = self.answer
-        if not answer:
-            return False
-        if answer.get('node') == mine['node']:
-            return True
-        return (answer.get('since_ns', 0), answer['node']) < (mine['since_ns'], mine['node'])
 
     def _withdraw(self) -> None:
         if self._publisher is not None:

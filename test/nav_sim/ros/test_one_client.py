@@ -59,11 +59,15 @@ def test_a_second_trainer_is_refused_at_once_while_the_first_trains_on(tmp_path,
         try:
             first = train('first', '--total-timesteps', '100000', '--learning-starts', '60',
                           '--checkpoint-freq', '100000')
-            # an observer (a plain subscriber) hears the sim all along, never refused.  A
-            # lockstep sim publishes only when its client steps it: the first image says the
-            # first run holds the sim (its claim comes before its first step)
-            observer.spin_until(lambda: observer.images > 0 or first.poll() is not None, 120.0,
-                                'the first run stepping the sim', runs)
+            # an observer (a plain subscriber) hears the sim all along, never refused.  The
+            # sim's answer to the claims names the first run; an image after that says that it
+            # steps the sim (the sim's first image, of its initial reset, may come before)
+            observer.spin_until(lambda: observer.holder.get('pid') == first.pid
+                                or first.poll() is not None, 120.0, 'the first run holding the '
+                                'sim', runs)
+            images = observer.images
+            observer.spin_until(lambda: observer.images > images or first.poll() is not None,
+                                60.0, 'the first run stepping the sim', runs)
             assert first.poll() is None, runs()
             started = time.monotonic()
             second = train('second', '--total-timesteps', '120')
@@ -103,9 +107,10 @@ class Graph:
         self.publishers: list[SimpleNamespace] = []  # of the claim topic, as the rmw shows them
         self.deliver = None  # the arbiter's claim callback
         self.log: list[str] = []  # what the arbiter logged
+        self.answers: list[dict] = []  # what it published on the controller topic
 
     def create_publisher(self, *args) -> SimpleNamespace:
-        return SimpleNamespace(publish=lambda msg: None)
+        return SimpleNamespace(publish=lambda msg: self.answers.append(json.loads(msg.data)))
 
     def create_subscription(self, msg_type, topic, callback, qos_profile) -> None:
         self.deliver = lambda claim_: callback(String(data=json.dumps(claim_)))
@@ -191,6 +196,32 @@ def test_a_refused_claim_never_stands_in_for_a_holder_that_has_gone(monkeypatch)
     assert arbiter.holder['node'] == '/ns/next'
 
 
+def test_a_holder_keeps_the_sim_when_a_claim_stamped_earlier_is_heard_after_it(monkeypatch):
+    # two trainers started at once: the one stamped first may be heard second, after the other
+    # was told that it holds the sim and began to step it
+    arbiter, graph = arbiter_at(monkeypatch, [1000.0])
+    graph.publishers = [named('first'), named('second')]
+    first = {'node': '/ns/first', 'host': 'h', 'pid': 1, 'since_ns': 20}
+    second = {'node': '/ns/second', 'host': 'h', 'pid': 2, 'since_ns': 10}
+    graph.deliver(first)
+    assert graph.answers[-1] == {**first, 'heard': [['/ns/first', 'h', 1]]}
+    assert claim.settles(graph.answers[-1], first)
+    assert not claim.settles(graph.answers[-1], second)  # not heard yet: the second waits
+    graph.deliver(second)
+    assert arbiter.holder == first
+    assert graph.answers[-1]['node'] == '/ns/first'
+    assert claim.settles(graph.answers[-1], second)  # heard, and not the holder: refused
+    # the holder claims again (a later stamp) and still holds; the holder changed once
+    graph.deliver({**first, 'since_ns': 30})
+    assert arbiter.holder['node'] == '/ns/first'
+    assert [line for line in graph.log if line.startswith('held by')] == [
+        'held by no client', 'held by /ns/first (process 1)']
+    # a free sim goes to the earliest claim heard
+    graph.publishers = [named('second')]
+    arbiter.update()
+    assert arbiter.holder == second
+
+
 def test_clients_of_two_processes_with_one_node_name_are_two_claims(monkeypatch):
     arbiter, graph = arbiter_at(monkeypatch, [1000.0])
     graph.publishers = [named('visnav_closed_loop'), named('visnav_closed_loop')]
@@ -201,13 +232,17 @@ def test_clients_of_two_processes_with_one_node_name_are_two_claims(monkeypatch)
 
 
 class Observer:
-    """A plain rclpy subscriber of the sim's camera."""
+    """A plain rclpy subscriber of the sim's camera and of its answer to the claims."""
 
     def __init__(self, namespace: str) -> None:
         self.context, self.node = own_node('observer', namespace)
         self.images = 0
+        self.holder: dict = {}  # the sim's answer to the claims (nav_sim.ros.claim)
         self.node.create_subscription(Image, interface.IMAGE_TOPIC, self._on_image,
                                       qos.OBSERVATION)
+        self.node.create_subscription(
+            String, interface.CONTROLLER_TOPIC,
+            lambda msg: setattr(self, 'holder', json.loads(msg.data)), qos.LATCHED)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
 
