@@ -5,11 +5,11 @@ that resets and steps a sim (:class:`nav_sim.ros.client.SimClient`: the env, the
 the demo) *claims* it when it attaches: it publishes, latched, on ``<ns>/sim_claim``
 (``std_msgs/String``) a JSON claim with its node, host, process id and the wall-clock time.
 The sim (:class:`ClaimArbiter`) hears every claim and publishes, latched, on
-``<ns>/sim_controller`` the claim that holds it, with the keys of every claim it has heard
-(``heard``).  A claim that holds the sim holds it as long as its publisher is in the graph; a
+``<ns>/sim_controller`` the claim that holds it, with every claim it has heard (``heard``: key and
+stamp).  A claim that holds the sim holds it as long as its publisher is in the graph; a
 claim heard later never displaces it, even one stamped earlier (two clients started at once).
 Only a free sim goes to a claim: the earliest of those heard.  The client waits until the
-answer names its claim or lists it as heard.  Its own claim, or one of its own process (the
+answer lists its claim as heard.  Its own claim, or one of its own process (the
 validation checklist attaches a second env to its own sim), and it controls the sim.  Another
 process's claim, and it is refused at once with :class:`nav_sim.errors.SimInUseError` (one line
 naming the namespace and the holder) and withdraws its claim.  The holder is never disturbed.
@@ -91,20 +91,29 @@ def holder_of(claims: dict[Key, dict[str, Any]],
                default=None)
 
 
-def settles(answer: dict[str, Any] | None, mine: dict[str, Any]) -> bool:
-    """Tell whether the sim's answer settles the claim ``mine``: it holds the sim, or was heard.
+def heard_entry(claim: dict[str, Any]) -> list[Any]:
+    """Return a claim as the sim's answer lists it among the claims heard: key and stamp."""
+    return [*key_of(claim), claim.get('since_ns', 0)]
 
-    Heard and not the holder, the claim is refused, unless the holder is of its own process.
+
+def settles(answer: dict[str, Any] | None, mine: dict[str, Any]) -> bool:
+    """Tell whether the sim's answer settles the claim ``mine``: the sim has heard it.
+
+    The answer names the holder: ``mine``, or one of its own process to share, or another
+    process's, which refuses it.  An answer that has not heard this very claim (key and stamp)
+    settles nothing: it may be one the sim published before, for a client of the same name.
     """
-    answer = answer or {}
-    return answer.get('node') == mine['node'] or list(key_of(mine)) in answer.get('heard', [])
+    return heard_entry(mine) in (answer or {}).get('heard', [])
 
 
 def _parse(msg: String) -> dict[str, Any] | None:
     try:
         claim = json.loads(msg.data)
-        return claim if isinstance(claim, dict) and isinstance(claim.get('node'), str) else None
-    except ValueError:
+        if not isinstance(claim, dict) or not isinstance(claim.get('node'), str):
+            return None
+        key_of(claim)  # a process id that is no number: not a claim
+        return claim
+    except (ValueError, TypeError):
         return None
 
 
@@ -162,7 +171,8 @@ class ClaimArbiter:
             self.node.get_logger().info(
                 f'held by {self.holder["node"]} (process {self.holder.get("pid")})'
                 if self.holder else 'held by no client')
-        text = json.dumps({**(self.holder or {}), 'heard': sorted(self.claims)})
+        heard = sorted(heard_entry(c) for c in self.claims.values())
+        text = json.dumps({**(self.holder or {}), 'heard': heard})
         if text != self._published:  # a new holder, or a claim heard or ended
             self._pub.publish(String(data=text))
             self._published = text

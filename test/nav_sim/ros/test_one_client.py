@@ -204,16 +204,19 @@ def test_a_holder_keeps_the_sim_when_a_claim_stamped_earlier_is_heard_after_it(m
     first = {'node': '/ns/first', 'host': 'h', 'pid': 1, 'since_ns': 20}
     second = {'node': '/ns/second', 'host': 'h', 'pid': 2, 'since_ns': 10}
     graph.deliver(first)
-    assert graph.answers[-1] == {**first, 'heard': [['/ns/first', 'h', 1]]}
+    assert graph.answers[-1] == {**first, 'heard': [['/ns/first', 'h', 1, 20]]}
     assert claim.settles(graph.answers[-1], first)
     assert not claim.settles(graph.answers[-1], second)  # not heard yet: the second waits
     graph.deliver(second)
     assert arbiter.holder == first
     assert graph.answers[-1]['node'] == '/ns/first'
     assert claim.settles(graph.answers[-1], second)  # heard, and not the holder: refused
-    # the holder claims again (a later stamp) and still holds; the holder changed once
-    graph.deliver({**first, 'since_ns': 30})
-    assert arbiter.holder['node'] == '/ns/first'
+    # the holder claims again (a later stamp) and still holds; the holder changed once.  An
+    # answer that has not heard the new claim does not settle it
+    again = {**first, 'since_ns': 30}
+    assert not claim.settles(graph.answers[-1], again)
+    graph.deliver(again)
+    assert arbiter.holder == again and claim.settles(graph.answers[-1], again)
     assert [line for line in graph.log if line.startswith('held by')] == [
         'held by no client', 'held by /ns/first (process 1)']
     # a free sim goes to the earliest claim heard
