@@ -28,76 +28,128 @@ from nav_sim.ros.sim_graph import UNKNOWN_NODE
 TRAIN = str(Path(sys.prefix) / 'bin' / 'nav-gym-train')
 
 
-def test_a_second_trainer_is_refused_at_once_while_the_first_trains_on(tmp_path, namespace):
-    # each run writes to files, never to a pipe that nobody reads while it trains, so that a
-    # failed wait can say what each run was doing
-    first = second = None
-    files = {name: (tmp_path / f'{name}.out', tmp_path / f'{name}.err')
-             for name in ('first', 'second')}
+class Trainers:
+    """Training runs attached to one sim, each writing to files.
 
-    def train(name: str, *settings: str) -> subprocess.Popen:
-        out, err = files[name]
+    Never to a pipe that nobody reads while it trains, so that a failed wait can say what each
+    run was doing.
+    """
+
+    def __init__(self, tmp_path: Path, namespace: str, sim: SimProcess) -> None:
+        self.tmp_path, self.namespace, self.sim = tmp_path, namespace, sim
+        self.runs: dict[str, subprocess.Popen] = {}
+
+    def files(self, name: str) -> tuple[Path, Path]:
+        return self.tmp_path / f'{name}.out', self.tmp_path / f'{name}.err'
+
+    def start(self, name: str, *settings: str) -> subprocess.Popen:
+        out, err = self.files(name)
         with out.open('w') as stdout, err.open('w') as stderr:
-            return subprocess.Popen(
-                [TRAIN, '--sim', 'attach', '--namespace', namespace, '--runs-dir',
-                 str(tmp_path), '--run-name', name, '--buffer-size', '500', '--sim-timeout',
-                 '30', *settings], stdout=stdout, stderr=stderr, text=True)
+            self.runs[name] = subprocess.Popen(
+                [TRAIN, '--sim', 'attach', '--namespace', self.namespace, '--runs-dir',
+                 str(self.tmp_path), '--run-name', name, '--buffer-size', '500',
+                 '--sim-timeout', '30', *settings], stdout=stdout, stderr=stderr, text=True)
+        return self.runs[name]
 
-    def runs() -> str:
-        """Each run's state and the end of its output: what a failed wait reports."""
+    def output(self, name: str) -> str:
+        return ''.join(path.read_text() for path in self.files(name) if path.exists())
+
+    def report(self) -> str:
+        """Each run's state, the end of its output and the sim's log: what a failed wait says."""
         lines = []
-        for name, run in (('first', first), ('second', second)):
-            state = 'not started' if run is None else (
-                'running' if run.poll() is None else f'exit {run.returncode}')
-            out, err = (path.read_text()[-2000:] if path.exists() else '' for path in files[name])
+        for name, run in self.runs.items():
+            state = 'running' if run.poll() is None else f'exit {run.returncode}'
+            out, err = (p.read_text()[-2000:] if p.exists() else '' for p in self.files(name))
             lines.append(f'{name}: {state}\n  stdout: {out!r}\n  stderr: {err!r}')
-        lines.append(f'sim: {sim.output()[-3000:]!r}')  # its claims and holders, among others
+        lines.append(f'sim: {self.sim.output()[-3000:]!r}')  # its claims and holders
         return '\n'.join(lines)
 
+    def stop(self) -> dict[str, int]:
+        """Interrupt the runs still going (SIGINT: each saves a checkpoint); their exit codes."""
+        return {name: interrupt(run, timeout=120)[0] if run.poll() is None else run.returncode
+                for name, run in self.runs.items()}
+
+
+LONG = ('--total-timesteps', '100000', '--learning-starts', '60', '--checkpoint-freq', '100000')
+
+
+def refusal(trainers: Trainers, name: str) -> str:
+    """Return the one line of a refused run's error output, checked."""
+    (line,) = trainers.files(name)[1].read_text().strip().splitlines()
+    assert line.startswith(f"nav-gym-train: error: the sim in namespace '{trainers.namespace}' "
+                           'is in use:'), line
+    assert 'one controlling client at a time' in line
+    return line
+
+
+def test_a_second_trainer_is_refused_at_once_while_the_first_trains_on(tmp_path, namespace):
     with SimProcess(namespace, {}) as sim:
+        trainers = Trainers(tmp_path, namespace, sim)
         observer = Observer(namespace)
         try:
-            first = train('first', '--total-timesteps', '100000', '--learning-starts', '60',
-                          '--checkpoint-freq', '100000')
+            first = trainers.start('first', *LONG)
             # an observer (a plain subscriber) hears the sim all along, never refused.  The
             # sim's answer to the claims names the first run; an image after that says that it
             # steps the sim (the sim's first image, of its initial reset, may come before)
             observer.spin_until(lambda: observer.holder.get('pid') == first.pid
                                 or first.poll() is not None, 120.0, 'the first run holding the '
-                                'sim', runs)
-            images = observer.images
-            observer.spin_until(lambda: observer.images > images or first.poll() is not None,
-                                60.0, 'the first run stepping the sim', runs)
-            assert first.poll() is None, runs()
+                                'sim', trainers.report)
+            observer.spin_until_images(lambda: first.poll() is not None, 60.0,
+                                       'the first run stepping the sim', trainers.report)
+            assert first.poll() is None, trainers.report()
             started = time.monotonic()
-            second = train('second', '--total-timesteps', '120')
-            observer.spin_until(lambda: second.poll() is not None, 120.0, 'the second run', runs)
+            second = trainers.start('second', '--total-timesteps', '120')
+            observer.spin_until(lambda: second.poll() is not None, 120.0, 'the second run',
+                                trainers.report)
             refused_in = time.monotonic() - started
-            images = observer.images  # still heard, and the first run still steps the sim
-            observer.spin_until(lambda: observer.images > images or first.poll() is not None,
-                                60.0, 'the first run going on', runs)
+            # still heard, and the first run still steps the sim
+            observer.spin_until_images(lambda: first.poll() is not None, 60.0,
+                                       'the first run going on', trainers.report)
             still_training = first.poll() is None
-            report = runs()
+            report = trainers.report()
         finally:
             try:
                 observer.close()
             finally:
-                if second is not None and second.poll() is None:
-                    interrupt(second, timeout=30)
-                if first is not None:
-                    code = interrupt(first, timeout=120)[0]
+                codes = trainers.stop()
         assert sim.alive()
-    second_err = files['second'][1].read_text()
-    assert second.returncode == 1 and refused_in < 20.0, report
-    (line,) = second_err.strip().splitlines()
-    assert line.startswith(f"nav-gym-train: error: the sim in namespace '{namespace}' is in "
-                           'use:'), line
-    assert 'one controlling client at a time' in line
-    # the observer heard images before the second run and after its refusal (the waits above)
-    output = files['first'][0].read_text() + files['first'][1].read_text()
-    assert still_training and code == 130 and 'interrupted at step' in output, \
+    assert codes['second'] == 1 and refused_in < 20.0, report
+    refusal(trainers, 'second')
+    output = trainers.output('first')
+    assert still_training and codes['first'] == 130 and 'interrupted at step' in output, \
         f'{report}\n{output}'
     assert 'Traceback' not in output
+
+
+def test_of_two_trainers_started_at_once_one_trains_and_the_other_is_refused(tmp_path,
+                                                                             namespace):
+    # their claims are stamped and heard in either order: never both granted
+    with SimProcess(namespace, {}) as sim:
+        trainers = Trainers(tmp_path, namespace, sim)
+        observer = Observer(namespace)
+        try:
+            runs = [trainers.start('a', *LONG), trainers.start('b', *LONG)]
+            observer.spin_until(lambda: any(run.poll() is not None for run in runs), 120.0,
+                                'one of the two runs refused', trainers.report)
+            (going,) = [run for run in runs if run.poll() is None] or [None]
+            assert going is not None, trainers.report()
+            observer.spin_until(lambda: observer.holder.get('pid') == going.pid
+                                or going.poll() is not None, 60.0, 'the other run holding the '
+                                'sim', trainers.report)
+            observer.spin_until_images(lambda: going.poll() is not None, 60.0,
+                                       'the other run stepping the sim', trainers.report)
+            still_training = going.poll() is None
+            report = trainers.report()
+        finally:
+            try:
+                observer.close()
+            finally:
+                codes = trainers.stop()
+        assert sim.alive()
+    refused, kept = ('a', 'b') if codes['a'] == 1 else ('b', 'a')
+    assert codes[refused] == 1 and codes[kept] == 130 and still_training, report
+    refusal(trainers, refused)
+    assert 'interrupted at step' in trainers.output(kept), report
 
 
 class Graph:
@@ -257,6 +309,11 @@ class Observer:
             self.executor.spin_once(timeout_sec=0.02)
             return done()
         wait_until(spun, timeout, what, interval=0, details=details)
+
+    def spin_until_images(self, ended, timeout: float, what: str, details=None) -> None:
+        """Spin until an image comes after those heard so far, or ``ended()`` holds."""
+        images = self.images
+        self.spin_until(lambda: self.images > images or ended(), timeout, what, details)
 
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=1.0)
