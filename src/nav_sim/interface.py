@@ -21,9 +21,9 @@ CLOCK_TOPIC = '/clock'  # rosgraph_msgs/Clock, with publish_clock (global: ROS's
 
 #: std_msgs/String, latched: a controlling client's claim, JSON {node, host, pid, since_ns}
 CLAIM_TOPIC = 'sim_claim'
-#: std_msgs/String, latched, from the sim: the claim that holds it, and the keys of the claims
-#: it has heard (JSON {node, host, pid, since_ns, heard}; only heard while none holds it; see
-#: nav_sim.ros.claim)
+#: std_msgs/String, latched, from the sim: the claim that holds it and every claim it has heard
+#: (JSON {node, host, pid, since_ns, heard: [[node, host, pid, since_ns], ...]}; {"heard": []}
+#: while none holds it; see nav_sim.ros.claim)
 CONTROLLER_TOPIC = 'sim_controller'
 
 RESET_SERVICE = 'reset'  # std_srvs/Trigger: a new episode (seed and split from parameters)

@@ -8,6 +8,8 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -38,6 +40,7 @@ class Trainers:
     def __init__(self, tmp_path: Path, namespace: str, sim: SimProcess) -> None:
         self.tmp_path, self.namespace, self.sim = tmp_path, namespace, sim
         self.runs: dict[str, subprocess.Popen] = {}
+        self.codes: dict[str, int] = {}  # the exit codes, once stopped
 
     def files(self, name: str) -> tuple[Path, Path]:
         return self.tmp_path / f'{name}.out', self.tmp_path / f'{name}.err'
@@ -82,37 +85,43 @@ def refusal(trainers: Trainers, name: str) -> str:
     return line
 
 
-def test_a_second_trainer_is_refused_at_once_while_the_first_trains_on(tmp_path, namespace):
+@contextmanager
+def trainers_on_a_sim(tmp_path: Path, namespace: str) -> Iterator[tuple[Trainers, Observer]]:
+    """Start a sim, give trainers for it and an observer of it (a plain subscriber).
+
+    On leaving, the observer closes, the runs still going are interrupted (every run's exit code
+    in ``trainers.codes``) and the sim must be alive.
+    """
     with SimProcess(namespace, {}) as sim:
         trainers = Trainers(tmp_path, namespace, sim)
         observer = Observer(namespace)
         try:
-            first = trainers.start('first', *LONG)
-            # an observer (a plain subscriber) hears the sim all along, never refused.  The
-            # sim's answer to the claims names the first run; an image after that says that it
-            # steps the sim (the sim's first image, of its initial reset, may come before)
-            observer.spin_until(lambda: observer.holder.get('pid') == first.pid
-                                or first.poll() is not None, 120.0, 'the first run holding the '
-                                'sim', trainers.report)
-            observer.spin_until_images(lambda: first.poll() is not None, 60.0,
-                                       'the first run stepping the sim', trainers.report)
-            assert first.poll() is None, trainers.report()
-            started = time.monotonic()
-            second = trainers.start('second', '--total-timesteps', '120')
-            observer.spin_until(lambda: second.poll() is not None, 120.0, 'the second run',
-                                trainers.report)
-            refused_in = time.monotonic() - started
-            # still heard, and the first run still steps the sim
-            observer.spin_until_images(lambda: first.poll() is not None, 60.0,
-                                       'the first run going on', trainers.report)
-            still_training = first.poll() is None
-            report = trainers.report()
+            yield trainers, observer
         finally:
             try:
                 observer.close()
             finally:
-                codes = trainers.stop()
+                trainers.codes = trainers.stop()
         assert sim.alive()
+
+
+def test_a_second_trainer_is_refused_at_once_while_the_first_trains_on(tmp_path, namespace):
+    with trainers_on_a_sim(tmp_path, namespace) as (trainers, observer):
+        first = trainers.start('first', *LONG)
+        # an observer hears the sim all along, never refused
+        observer.spin_until_holding(first, 120.0, 'the first run', trainers.report)
+        assert first.poll() is None, trainers.report()
+        started = time.monotonic()
+        second = trainers.start('second', '--total-timesteps', '120')
+        observer.spin_until(lambda: second.poll() is not None, 120.0, 'the second run',
+                            trainers.report)
+        refused_in = time.monotonic() - started
+        # still heard, and the first run still steps the sim
+        observer.spin_until_images(lambda: first.poll() is not None, 60.0,
+                                   'the first run going on', trainers.report)
+        still_training = first.poll() is None
+        report = trainers.report()
+    codes = trainers.codes
     assert codes['second'] == 1 and refused_in < 20.0, report
     refusal(trainers, 'second')
     output = trainers.output('first')
@@ -124,28 +133,16 @@ def test_a_second_trainer_is_refused_at_once_while_the_first_trains_on(tmp_path,
 def test_of_two_trainers_started_at_once_one_trains_and_the_other_is_refused(tmp_path,
                                                                              namespace):
     # their claims are stamped and heard in either order: never both granted
-    with SimProcess(namespace, {}) as sim:
-        trainers = Trainers(tmp_path, namespace, sim)
-        observer = Observer(namespace)
-        try:
-            runs = [trainers.start('a', *LONG), trainers.start('b', *LONG)]
-            observer.spin_until(lambda: any(run.poll() is not None for run in runs), 120.0,
-                                'one of the two runs refused', trainers.report)
-            (going,) = [run for run in runs if run.poll() is None] or [None]
-            assert going is not None, trainers.report()
-            observer.spin_until(lambda: observer.holder.get('pid') == going.pid
-                                or going.poll() is not None, 60.0, 'the other run holding the '
-                                'sim', trainers.report)
-            observer.spin_until_images(lambda: going.poll() is not None, 60.0,
-                                       'the other run stepping the sim', trainers.report)
-            still_training = going.poll() is None
-            report = trainers.report()
-        finally:
-            try:
-                observer.close()
-            finally:
-                codes = trainers.stop()
-        assert sim.alive()
+    with trainers_on_a_sim(tmp_path, namespace) as (trainers, observer):
+        runs = [trainers.start('a', *LONG), trainers.start('b', *LONG)]
+        observer.spin_until(lambda: any(run.poll() is not None for run in runs), 120.0,
+                            'one of the two runs refused', trainers.report)
+        (going,) = [run for run in runs if run.poll() is None] or [None]
+        assert going is not None, trainers.report()
+        observer.spin_until_holding(going, 60.0, 'the other run', trainers.report)
+        still_training = going.poll() is None
+        report = trainers.report()
+    codes = trainers.codes
     refused, kept = ('a', 'b') if codes['a'] == 1 else ('b', 'a')
     assert codes[refused] == 1 and codes[kept] == 130 and still_training, report
     refusal(trainers, refused)
@@ -314,6 +311,18 @@ class Observer:
         """Spin until an image comes after those heard so far, or ``ended()`` holds."""
         images = self.images
         self.spin_until(lambda: self.images > images or ended(), timeout, what, details)
+
+    def spin_until_holding(self, run: subprocess.Popen, timeout: float, what: str,
+                           details=None) -> None:
+        """Spin until the sim's answer names ``run``'s process, then until it steps the sim.
+
+        An image after the answer says that it steps the sim (the sim's first image, of its
+        initial reset, may come before any claim).  Either wait ends early if ``run`` ends.
+        """
+        self.spin_until(lambda: self.holder.get('pid') == run.pid or run.poll() is not None,
+                        timeout, f'{what} holding the sim', details)
+        self.spin_until_images(lambda: run.poll() is not None, 60.0,
+                               f'{what} stepping the sim', details)
 
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=1.0)
