@@ -48,6 +48,7 @@ import numpy as np
 import torch as th
 from stable_baselines3 import DQN
 from stable_baselines3.common.torch_layers import create_mlp
+from stable_baselines3.common.type_aliases import TrainFreq, TrainFrequencyUnit
 from stable_baselines3.dqn.policies import CnnPolicy, QNetwork
 from torch import nn
 from torch.nn import functional as F
@@ -154,6 +155,22 @@ class Learner(DQN):
         if self._last_obs is not before:
             begin_depths(self.replay_buffer, self.env, range(self.n_envs))
         return result
+
+    def collect_rollouts(self, env: Any, callback: Any, train_freq: TrainFreq, *args: Any,
+                         **kwargs: Any) -> Any:
+        """SB3's collection of ``train_freq`` steps, the last rollout cut to the budget's rest.
+
+        SB3 collects a whole ``train_freq`` whatever the budget has left, so a run whose
+        budget is not a multiple of ``train_freq`` vector steps overshot it: a resume from a
+        Ctrl-C mid-rollout ended at 200,001 of 200,000 steps, and ``n_envs: 8`` would end 50,000
+        at 50,016.  Now a run ends at its budget (within ``n_envs - 1``: a vector step is
+        whole), and the short last rollout still gets its gradient steps.  A budget that is a
+        multiple is collected as before, bit for bit.  SB3's vanilla ``DQN`` keeps SB3's rule.
+        """
+        left = -(-(self._total_timesteps - self.num_timesteps) // env.num_envs)  # vector steps
+        if train_freq.unit == TrainFrequencyUnit.STEP and 0 < left < train_freq.frequency:
+            train_freq = TrainFreq(left, train_freq.unit)
+        return super().collect_rollouts(env, callback, train_freq, *args, **kwargs)
 
     def _store_transition(self, replay_buffer: Any, buffer_action: Any, new_obs: Any,
                           reward: Any, dones: Any, infos: Any) -> None:

@@ -217,6 +217,23 @@ def test_a_checkpoint_of_the_learner_loads_with_dqn_load(tmp_path, spaces_only, 
     assert model.policy.optimizer.defaults['fused'] is True
 
 
+@pytest.mark.parametrize('n_envs', [1, 2])
+def test_a_run_and_its_resume_end_at_their_budget_not_at_a_whole_rollout(spaces_only, n_envs):
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    def model(cls: type) -> DQN:
+        return cls('CnnPolicy', DummyVecEnv([spaces_only] * n_envs), buffer_size=100,
+                   learning_starts=4, batch_size=4, train_freq=4, seed=1, device='cpu')
+
+    # the probe: SB3 collects whole rollouts of 4 vector steps past a budget of 10 steps
+    assert model(DQN).learn(10).num_timesteps == 4 * n_envs * -(-10 // (4 * n_envs))
+    ours = model(learner_class(None, LearnerSpec(n_steps=1))).learn(10)
+    assert ours.num_timesteps == 10 and ours._n_updates == 2  # after 8 steps, and after the
+    # short last rollout too
+    ours.learn(7, reset_num_timesteps=False)  # a resume of a run stopped mid-rollout
+    assert ours.num_timesteps == 17 + (n_envs == 2)  # a vector step is whole: 18 with 2 envs
+
+
 # --- the auxiliary depth loss (issue 30): targets beside the observations, never in them --------
 def _depth_buffers():
     from nav_gym.training.aux_depth import DepthFrameStackReplayBuffer, DepthReplayBuffer
