@@ -162,9 +162,10 @@ class Learner(DQN):
 
         SB3 collects a whole ``train_freq`` whatever the budget has left, so a run whose
         budget is not a multiple of ``train_freq`` vector steps overshot it: a resume from a
-        Ctrl-C mid-rollout ended at 200,001 of 200,000 steps, and ``n_envs: 8`` would end 50,000
-        at 50,016.  Now a run ends at its budget (within ``n_envs - 1``: a vector step is
-        whole), and the short last rollout still gets its gradient steps.  A budget that is a
+        Ctrl-C mid-rollout ended at 200,001 of 200,000 steps, and ``n_envs: 3`` (4 vector steps
+        a rollout, ``vector_schedule``) would end 50,000 at 50,004.  Now a run ends at its budget
+        (within ``n_envs - 1``: a vector step is whole), and the short last rollout still gets
+        its gradient steps.  A budget that is a
         multiple is collected as before, bit for bit.  SB3's vanilla ``DQN`` keeps SB3's rule.
         """
         left = -(-(self._total_timesteps - self.num_timesteps) // env.num_envs)  # vector steps
