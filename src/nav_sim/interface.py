@@ -7,6 +7,8 @@ the node, its client, the graph checks, the bag recorder and the bag reader.
 
 from __future__ import annotations
 
+import re
+
 NODE_NAME = 'sim_node'
 #: the frame of odometry, the goal pose and the live view's 3D scene (sim_node's odom_frame)
 ODOM_FRAME = 'odom'
@@ -65,3 +67,21 @@ def cmd_vel_type(stamped: bool) -> str:
     ``diff_drive_controller`` takes.  The sim, its clients and the policy node share the setting.
     """
     return CMD_VEL_STAMPED_TYPE if stamped else CMD_VEL_TYPE
+
+_TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
+
+
+def absolute_namespace(namespace: str) -> str:
+    """Return a namespace as the graph names it: ``''`` (the root) or ``'/a/b'``.
+
+    A relative one (``'robot1'``) is taken from the root, as a node given it takes it; a
+    namespace ROS would refuse (a token that is empty, starts with a digit or holds other
+    characters than letters, digits and ``_``) raises ValueError with one line, before a node's
+    ``-r __ns:=`` remap would fail inside rcl.
+    """
+    tokens = namespace.strip('/').split('/') if namespace.strip('/') else []
+    bad = next((token for token in tokens if not _TOKEN.fullmatch(token)), None)
+    if bad is not None or '//' in namespace:
+        raise ValueError(f'{namespace!r} is not a ROS namespace: tokens of letters, digits and '
+                         f"'_' that do not start with a digit, separated by '/' (e.g. /robot1)")
+    return ''.join(f'/{token}' for token in tokens)

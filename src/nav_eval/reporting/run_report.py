@@ -54,7 +54,7 @@ SECTIONS = ('1. Observation and action checks', '2. Training',
             '7. Attempts and targeted improvements', '8. Reproduce')
 HYPERPARAMETERS = ('double_q', 'n_steps', 'dueling', 'augment_shift', 'augment_colour',
                    'prioritized_replay', 'frame_stack', 'previous_action', 'aux_depth',
-                   'munchausen', 'reset_interval', 'priority_alpha', 'priority_beta',
+                   'munchausen', 'reset_interval', 'recurrent', 'priority_alpha', 'priority_beta',
                    'learning_rate', 'buffer_size', 'learning_starts', 'batch_size', 'gamma',
                    'train_freq', 'gradient_steps', 'target_update_interval',
                    'exploration_fraction', 'exploration_initial_eps', 'exploration_final_eps',

@@ -19,6 +19,7 @@ from nav_sim.core.config import (
 )
 from nav_sim.core.world_file import SETTING_PREFIX, world_settings
 from nav_sim.errors import ConfigError, WorldError
+from nav_sim.interface import absolute_namespace
 from nav_sim.paths import find_world
 from nav_sim.ros.settings import check_sim_params
 
@@ -103,6 +104,10 @@ class EnvConfig:
     def __post_init__(self) -> None:
         """Refuse settings the env cannot work with (TrainConfigError): each field's bounds."""
         check_bounds(self, TrainConfigError)
+        try:  # '/a/b' from here on: the graph's names and the sim's remap agree
+            object.__setattr__(self, 'namespace', absolute_namespace(self.namespace))
+        except ValueError as exc:
+            raise TrainConfigError(f'namespace: {exc}') from None
         if self.sim not in SIM_MODES:
             raise TrainConfigError(f'sim must be one of {list(SIM_MODES)}, got {self.sim!r}')
         if self.sim_params is None:

@@ -107,6 +107,7 @@ class TrainConfig:
     aux_depth: float = _learner('aux_depth')
     munchausen: bool = _learner('munchausen')
     reset_interval: int = _learner('reset_interval')
+    recurrent: int = _learner('recurrent')
     priority_alpha: float = _learner('priority_alpha')
     priority_beta: float = _learner('priority_beta')
     checkpoint_freq: int = setting(10_000, 'steps between checkpoints (all are kept)',
@@ -163,8 +164,10 @@ class TrainConfig:
         if self.n_envs > 1 and self.sim == 'attach':
             raise TrainConfigError(f"n_envs {self.n_envs} starts a sim per env: sim must be "
                                    "'auto' or 'embedded', not 'attach'")
-        # the env's checks, and its resolved values (sim_params {}, the world's episode limit)
+        # the env's checks, and its resolved values (the absolute namespace, sim_params {}, the
+        # world's episode limit)
         env = EnvConfig(**{name: getattr(self, name) for name in _ENV_FIELDS})
+        object.__setattr__(self, 'namespace', env.namespace)
         object.__setattr__(self, 'sim_params', env.sim_params)
         object.__setattr__(self, 'max_episode_steps', env.max_episode_steps)
 

@@ -25,6 +25,9 @@ own ``DQN`` untouched (the workshop's learner, bit for bit: config/workshop.yaml
   steps, against the primacy bias at a higher replay ratio (Nikishin et al. 2022);
 - ``frame_stack``: the agent's last k frames as its input, replayed from single frames
   (:mod:`nav_gym.training.memory`; DRQN's comparison, Hausknecht & Stone 2015);
+- ``recurrent``: the window of ``frame_stack`` frames read by an LSTM over each frame's CNN
+  features instead of stacked into the first convolution (DRQN; R2D2's burn-in, from a zero
+  state at the window's oldest frame: :mod:`nav_gym.training.recurrent`);
 - ``aux_depth``: an auxiliary loss of this weight, a linear head on the online network's
   features predicting the camera's coarse depth of each sampled observation (Mirowski et al.
   2017; UNREAL, Jaderberg et al. 2017); the targets come from ``info['depth']`` into a buffer
@@ -63,6 +66,7 @@ from nav_gym.training.aux_depth import (
     depth_loss,
 )
 from nav_gym.training.memory import FrameStackReplayBuffer
+from nav_gym.training.recurrent import recurrent_policy_kwargs
 from nav_gym.training.replay import (  # SumTree: buffers pickled before name it here
     DepthPrioritizedReplayBuffer,
     PrioritizedReplayBuffer,
@@ -254,6 +258,9 @@ def learner_kwargs(spec: LearnerSpec, gamma: float) -> dict[str, Any]:
         kwargs['replay_buffer_kwargs'] = {'frame_stack': spec.frame_stack,
                                           'previous_action': spec.previous_action,
                                           'n_steps': spec.n_steps, 'gamma': gamma}
+        if spec.recurrent:  # the window read by an LSTM, not stacked into the first conv
+            kwargs['policy_kwargs'].update(recurrent_policy_kwargs(spec.frame_stack,
+                                                                   spec.recurrent))
     elif spec.prioritized_replay:
         kwargs['replay_buffer_class'] = (DepthPrioritizedReplayBuffer if depth
                                          else PrioritizedReplayBuffer)

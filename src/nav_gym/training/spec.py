@@ -24,7 +24,7 @@ from nav_sim.core.config import (
 #: the components' flags (LearnerSpec fields), each with its value that turns the component off
 COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0, 'augment_colour': 0.0,
               'prioritized_replay': False, 'frame_stack': 1, 'previous_action': False,
-              'aux_depth': 0.0, 'munchausen': False, 'reset_interval': 0}
+              'aux_depth': 0.0, 'munchausen': False, 'reset_interval': 0, 'recurrent': 0}
 
 
 @dataclass(frozen=True)
@@ -77,6 +77,12 @@ class LearnerSpec:
                                   'kept) and forget their optimiser state: resets against the '
                                   'primacy bias, which allow a higher replay ratio '
                                   '(gradient_steps; Nikishin et al. 2022); 0: off', NON_NEGATIVE)
+    recurrent: int = setting(0, 'a recurrent Q-network: an LSTM of this many units reads the '
+                             "CNN features of each frame of the agent's frame_stack window, "
+                             "oldest first from a zero state (the frames before the latest "
+                             'are its burn-in), and its last output feeds the Q head (DRQN, '
+                             'Hausknecht & Stone 2015; R2D2, Kapturowski et al. 2019); needs '
+                             'frame_stack > 1; 0: off', Bounds(0, 1024))
     priority_alpha: float = setting(0.6, 'prioritized replay: priority = (|TD error| + '
                                     'eps)^alpha', FRACTION)
     priority_beta: float = setting(0.4, 'prioritized replay: importance-weight exponent at the '
@@ -87,6 +93,9 @@ class LearnerSpec:
         check_bounds(self, TrainConfigError)
         if self.munchausen and self.double_q:
             raise TrainConfigError('munchausen replaces Double DQN targets: set double_q: false')
+        if self.recurrent and self.frame_stack < 2:
+            raise TrainConfigError('recurrent reads the frame_stack window: set frame_stack to '
+                                   '2 or more')
         if self.memory and self.prioritized_replay:
             raise TrainConfigError('prioritized_replay and memory (frame_stack > 1, '
                                    'previous_action) do not combine yet: set one of them')
@@ -115,6 +124,8 @@ class LearnerSpec:
             (self.augment_colour, f'colour jitter of strength {self.augment_colour:g} (RAD, '
                                   'Laskin et al. 2020)'),
             (self.frame_stack > 1, f'a {self.frame_stack}-frame stack (Hausknecht & Stone 2015)'),
+            (self.recurrent, f'an LSTM of {self.recurrent} units over the window (Hausknecht & '
+                             'Stone 2015)'),
             (self.previous_action, 'the previous action as input (Mirowski et al. 2017)'),
             (self.aux_depth, f'an auxiliary depth loss of weight {self.aux_depth:g} (Mirowski et '
                              'al. 2017)'),

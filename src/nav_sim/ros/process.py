@@ -12,6 +12,7 @@ from typing import Any
 
 from nav_sim.core.config import convert
 from nav_sim.errors import ConfigError
+from nav_sim.interface import absolute_namespace
 from nav_sim.paths import executable_path
 from nav_sim.ros.settings import PARAMETER_TYPES, ros_integer_problem
 
@@ -70,7 +71,7 @@ def node_ros_args(namespace: str = '', params: Mapping[str, Any] | None = None,
     """
     args = ['--ros-args']
     if namespace:
-        args += ['-r', f'__ns:={namespace}']
+        args += ['-r', f'__ns:={absolute_namespace(namespace)}']
     if params_file:
         args += ['--params-file', params_file]
     for key, value in (params or {}).items():

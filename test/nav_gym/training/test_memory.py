@@ -10,7 +10,8 @@ from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from nav_gym.training.memory import FrameStackEnv, FrameStackReplayBuffer
+from nav_gym.training.memory import FrameStackEnv, FrameStackReplayBuffer, stacked_space
+from nav_gym.training.recurrent import CNN_FEATURES, RecurrentCnn
 
 
 class Counter(gym.Env):
@@ -283,3 +284,81 @@ def test_a_memory_learner_jitters_its_stacks_frames_and_keeps_their_action_plane
         assert (strength, frames, images.shape[1]) == (0.3, 2, 9)
         assert th.equal(out[:, 6:], images[:, 6:].float())  # the action planes, as they were
         assert not th.equal(out[:, :6], images[:, :6].float())  # the probe: frames jittered
+
+
+# the recurrent Q-network (recurrent): an LSTM over the same window, in training and acting
+
+def window(k: int, n_actions: int = 0) -> spaces.Box:
+    """Return the space of a window of k (3, 84, 84) frames and n_actions planes."""
+    return stacked_space(spaces.Box(0, 255, (3, 84, 84), np.uint8), k, n_actions)
+
+
+def test_the_lstm_reads_the_window_oldest_first_from_a_zero_state_its_burn_in():
+    th.manual_seed(0)
+    net = RecurrentCnn(window(3, 3), frames=3, hidden=16)
+    assert net.features_dim == 16 + 3 and net.n_actions == 3
+    obs = th.rand(2, 12, 84, 84)
+    obs[:, 9:] = th.tensor([[0.0, 1.0, 0.0], [0.0, 0.0, 0.0]])[:, :, None, None]
+    out = net(obs)
+    # by hand: each frame through the CNN, the LSTM stepped from zeros, oldest frame first
+    state = (th.zeros(1, 2, 16), th.zeros(1, 2, 16))
+    for f in range(3):
+        step, state = net.lstm(net.cnn(obs[:, 3 * f:3 * f + 3])[:, None], state)
+    assert th.allclose(out[:, :16], step[:, 0], atol=1e-6)
+    assert out[:, 16:].tolist() == [[0.0, 1.0, 0.0], [0.0, 0.0, 0.0]]  # the previous action
+    # the burn-in counts: the oldest frame changes the output, the action planes' rest do not
+    older = obs.clone()
+    older[:, :3] = th.rand(2, 3, 84, 84)
+    assert not th.allclose(net(older)[:, :16], out[:, :16])
+    planes = obs.clone()
+    planes[:, 9:, 1:] = 0.5
+    assert th.equal(net(planes), out)
+    assert CNN_FEATURES == net.lstm.input_size
+
+
+def test_a_window_needs_two_frames_and_the_flag_needs_a_stack():
+    from nav_gym.errors import TrainConfigError
+    from nav_gym.training.config import TrainConfig
+
+    with pytest.raises(ValueError, match='at least 2 frames'):
+        RecurrentCnn(window(1), frames=1, hidden=8)
+    with pytest.raises(ValueError, match='not a window of 4 frames'):
+        RecurrentCnn(window(3), frames=4, hidden=8)
+    with pytest.raises(TrainConfigError, match='set frame_stack to 2 or more'):
+        TrainConfig(recurrent=64)
+    assert TrainConfig(recurrent=64, frame_stack=4).learner().describe().endswith(
+        'a 4-frame stack (Hausknecht & Stone 2015), an LSTM of 64 units over the window '
+        '(Hausknecht & Stone 2015)')
+
+
+@pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
+def test_a_recurrent_learner_trains_and_its_actor_and_export_begin_each_episode_afresh(
+        spaces_only, tmp_path):
+    from nav_gym.policy.export import export_policy
+    from nav_gym.policy.exported import OnnxActor
+    from nav_gym.training.spec import LearnerSpec
+
+    spec = LearnerSpec(frame_stack=3, recurrent=32, previous_action=True)
+    envs = FrameStackEnv(DummyVecEnv([spaces_only]), 3, previous_action=True)
+    model, decisions = two_episodes(spec, envs, tmp_path)
+    assert isinstance(model.q_net.features_extractor, RecurrentCnn)
+    assert isinstance(model.replay_buffer, FrameStackReplayBuffer)  # windows of single frames
+    assert model.replay_buffer.observations.frames.shape[2:] == (3, 84, 84)
+    # the actor's windows: the new episode's first frame stands in for all three, no action
+    firsts = [[int(t[0, c, 0, 0]) for c in (0, 3, 6)] for t, _ in decisions]
+    assert firsts == [[10, 10, 10], [10, 10, 20], [30, 30, 30]]
+    assert not decisions[2][0][0, 9:].any()
+    # no state carried over: the new episode's Q-values are those of a fresh actor's first
+    loaded = DQN.load(tmp_path / 'model.zip', device='cpu')
+    assert isinstance(loaded.q_net.features_extractor, RecurrentCnn)
+    fresh = loaded.q_net(th.as_tensor(np.asarray(decisions[2][0])))
+    assert th.allclose(fresh, model.q_net(decisions[2][0]), atol=1e-6)
+    # the ONNX export carries the window as its input and gives the same Q-values
+    exported = export_policy(tmp_path / 'model.zip', tmp_path / 'export')
+    assert exported.meta['input']['shape'] == [1, 12, 84, 84]
+    onnx = OnnxActor(exported)
+    onnx.begin_episode(1)
+    frames = [np.full((3, 84, 84), value, np.uint8) for value in (10, 20)]
+    first = onnx.act(frames[0])
+    assert first[0] == decisions[0][1]
+    assert np.allclose(first[1], loaded.q_net(decisions[0][0]).detach().numpy()[0], atol=1e-4)

@@ -136,10 +136,24 @@ def test_rules_between_settings_and_names():
         ({'device': 'gpu'}, "device must be 'auto', 'cpu', 'cuda' or 'cuda:N'"),
         ({'run_name': 'a/b'}, 'run_name must be one plain path component'),
         ({'sim_params': {'bogus': 1}}, "unknown sim_node parameter(s) ['bogus']"),
+        ({'namespace': 'robot 1'}, "namespace: 'robot 1' is not a ROS namespace"),
+        ({'namespace': '/a//b'}, "namespace: '/a//b' is not a ROS namespace"),
+        ({'namespace': '/1robot'}, "namespace: '/1robot' is not a ROS namespace"),
     ]:
         with pytest.raises(Exception, match=message.replace('(', r'\(').replace(')', r'\)')
                            .replace('[', r'\[').replace(']', r'\]')):
             TrainConfig(**values)
+
+
+def test_a_namespace_is_taken_from_the_root_as_a_node_takes_it():
+    from nav_sim.ros.process import node_ros_args
+
+    # a relative namespace once reached the sim's `-r __ns:=robot1`, which rcl refuses
+    assert [TrainConfig(namespace=ns).namespace for ns in ('', '/', 'robot1', '/robot1/',
+                                                           'a/b_2')] == [
+        '', '', '/robot1', '/robot1', '/a/b_2']
+    assert TrainConfig(namespace='robot1').env_config().namespace == '/robot1'
+    assert node_ros_args('robot1') == ['--ros-args', '-r', '__ns:=/robot1']
 
 
 def test_a_bad_value_from_the_installed_command_is_one_line_and_nothing_is_written(tmp_path):
