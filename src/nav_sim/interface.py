@@ -72,14 +72,17 @@ _TOKEN = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
 
 
 def absolute_namespace(namespace: str) -> str:
-    """Return a namespace as the graph names it: ``''`` (the root) or ``'/a/b'``.
+    """Return a namespace as the graph names it: ``'/a/b'``, or ``'/'`` and ``''`` as given.
 
-    A relative one (``'robot1'``) is taken from the root, as a node given it takes it; a
-    namespace ROS would refuse (a token that is empty, starts with a digit or holds other
-    characters than letters, digits and ``_``) raises ValueError with one line, before a node's
-    ``-r __ns:=`` remap would fail inside rcl.
+    ``'/'`` names the root and ``''`` leaves it unsaid (an env then picks a fresh namespace for
+    a sim it starts).  A relative one (``'robot1'``) is taken from the root, as a node given it
+    takes it; a namespace ROS would refuse (a token that is empty, starts with a digit or holds
+    other characters than letters, digits and ``_``) raises ValueError with one line, before a
+    node's ``-r __ns:=`` remap would fail inside rcl.
     """
-    tokens = namespace.strip('/').split('/') if namespace.strip('/') else []
+    if namespace in ('', '/'):
+        return namespace
+    tokens = namespace.strip('/').split('/')
     bad = next((token for token in tokens if not _TOKEN.fullmatch(token)), None)
     if bad is not None or '//' in namespace:
         raise ValueError(f'{namespace!r} is not a ROS namespace: tokens of letters, digits and '

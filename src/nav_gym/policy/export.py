@@ -94,9 +94,6 @@ def _acting_network(model: Any, checkpoint: Path) -> Any:
     if network is None:
         raise PolicyModelError(f'{checkpoint} is a {type(model).__name__}, not a DQN: only '
                                'the Q-network of a DQN learner exports')
-    if getattr(model.policy, 'recurrent', False):  # a recurrent state: not yet carried
-        raise PolicyModelError(f'{checkpoint}: a recurrent learner does not export yet (its '
-                               'state would be an input and an output of the graph)')
     return network.eval()
 
 

@@ -204,7 +204,8 @@ class TrainConfig:
         if self.n_envs == 1:
             return [self.env_config()]
         return [self.env_config(sim='embedded',
-                                namespace=f'{self.namespace}/env{i}' if self.namespace else '')
+                                namespace=f"{self.namespace.rstrip('/')}/env{i}"
+                                if self.namespace else '')
                 for i in range(self.n_envs)]
 
     def with_full_sim_params(self) -> TrainConfig:

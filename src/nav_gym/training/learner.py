@@ -259,8 +259,8 @@ def learner_kwargs(spec: LearnerSpec, gamma: float) -> dict[str, Any]:
                                           'previous_action': spec.previous_action,
                                           'n_steps': spec.n_steps, 'gamma': gamma}
         if spec.recurrent:  # the window read by an LSTM, not stacked into the first conv
-            kwargs['policy_kwargs'].update(recurrent_policy_kwargs(spec.frame_stack,
-                                                                   spec.recurrent))
+            kwargs['policy_kwargs'].update(recurrent_policy_kwargs(
+                spec.frame_stack, spec.recurrent, spec.previous_action))
     elif spec.prioritized_replay:
         kwargs['replay_buffer_class'] = (DepthPrioritizedReplayBuffer if depth
                                          else PrioritizedReplayBuffer)

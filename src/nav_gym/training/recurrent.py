@@ -8,7 +8,8 @@ replayed from single frames (:class:`nav_gym.training.memory.FrameStackReplayBuf
 
 Each frame of the window goes through its own pass of SB3's ``NatureCNN`` (shared weights), an
 LSTM reads the frames' features oldest first from a zero state, and its last output is the
-features of the Q head (with the previous action's one-hot values after it, ``previous_action``).
+features of SB3's Q head, one linear layer as NatureCNN's (with the previous action's one-hot
+values after it, ``previous_action``).
 So the state always begins at the window's oldest frame: the ``k - 1`` frames before the latest
 are the burn-in that builds the state, the loss is on the latest, and a window never crosses an
 episode's start (the episode's first frame stands in before it, as the stack pads).  Acting
@@ -42,14 +43,16 @@ class RecurrentCnn(BaseFeaturesExtractor):
     the latest frame, then the previous action's one-hot values (the planes' first pixel).
     """
 
-    def __init__(self, observation_space: spaces.Box, frames: int, hidden: int) -> None:
+    def __init__(self, observation_space: spaces.Box, frames: int, hidden: int,
+                 previous_action: bool = False) -> None:
         """Build the per-frame CNN and the LSTM for windows of ``observation_space``."""
         if frames < 2:
             raise ValueError(f'a recurrent network reads a window of at least 2 frames, '
                              f'got {frames}')
         n_actions = observation_space.shape[0] - frames * OBS_SHAPE[0]
-        if n_actions < 0:
-            raise ValueError(f'{observation_space.shape} is not a window of {frames} frames')
+        if n_actions < 0 or (n_actions > 0) != previous_action:
+            raise ValueError(f'{observation_space.shape} is not a window of {frames} frames'
+                             f"{' and action planes' if previous_action else ''}")
         super().__init__(observation_space, hidden + n_actions)
         self.frames, self.n_actions = frames, n_actions
         one = frame_space(observation_space, frames, n_actions)
@@ -70,7 +73,13 @@ class RecurrentCnn(BaseFeaturesExtractor):
         return th.cat([latest, observations[:, channels:, 0, 0]], dim=1)
 
 
-def recurrent_policy_kwargs(frames: int, hidden: int) -> dict:
-    """Return the ``policy_kwargs`` that give SB3's Q-networks the recurrent extractor."""
+def recurrent_policy_kwargs(frames: int, hidden: int, previous_action: bool) -> dict:
+    """Return the ``policy_kwargs`` that give SB3's Q-networks the recurrent extractor.
+
+    ``net_arch`` is empty, so that the Q head is one linear layer on the features, as SB3
+    gives NatureCNN (for any other extractor it would add two hidden layers of 64).
+    """
     return {'features_extractor_class': RecurrentCnn,
-            'features_extractor_kwargs': {'frames': frames, 'hidden': hidden}}
+            'features_extractor_kwargs': {'frames': frames, 'hidden': hidden,
+                                          'previous_action': previous_action},
+            'net_arch': []}

@@ -11,7 +11,7 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from nav_gym.training.memory import FrameStackEnv, FrameStackReplayBuffer, stacked_space
-from nav_gym.training.recurrent import CNN_FEATURES, RecurrentCnn
+from nav_gym.training.recurrent import RecurrentCnn
 
 
 class Counter(gym.Env):
@@ -295,7 +295,7 @@ def window(k: int, n_actions: int = 0) -> spaces.Box:
 
 def test_the_lstm_reads_the_window_oldest_first_from_a_zero_state_its_burn_in():
     th.manual_seed(0)
-    net = RecurrentCnn(window(3, 3), frames=3, hidden=16)
+    net = RecurrentCnn(window(3, 3), frames=3, hidden=16, previous_action=True)
     assert net.features_dim == 16 + 3 and net.n_actions == 3
     obs = th.rand(2, 12, 84, 84)
     obs[:, 9:] = th.tensor([[0.0, 1.0, 0.0], [0.0, 0.0, 0.0]])[:, :, None, None]
@@ -313,7 +313,6 @@ def test_the_lstm_reads_the_window_oldest_first_from_a_zero_state_its_burn_in():
     planes = obs.clone()
     planes[:, 9:, 1:] = 0.5
     assert th.equal(net(planes), out)
-    assert CNN_FEATURES == net.lstm.input_size
 
 
 def test_a_window_needs_two_frames_and_the_flag_needs_a_stack():
@@ -324,6 +323,10 @@ def test_a_window_needs_two_frames_and_the_flag_needs_a_stack():
         RecurrentCnn(window(1), frames=1, hidden=8)
     with pytest.raises(ValueError, match='not a window of 4 frames'):
         RecurrentCnn(window(3), frames=4, hidden=8)
+    with pytest.raises(ValueError, match='not a window of 3 frames and action planes'):
+        RecurrentCnn(window(3), frames=3, hidden=8, previous_action=True)
+    with pytest.raises(ValueError, match=r'\(12, 84, 84\) is not a window of 3 frames$'):
+        RecurrentCnn(window(4), frames=3, hidden=8)  # a frame too many is no action planes
     with pytest.raises(TrainConfigError, match='set frame_stack to 2 or more'):
         TrainConfig(recurrent=64)
     assert TrainConfig(recurrent=64, frame_stack=4).learner().describe().endswith(
@@ -348,17 +351,25 @@ def test_a_recurrent_learner_trains_and_its_actor_and_export_begin_each_episode_
     firsts = [[int(t[0, c, 0, 0]) for c in (0, 3, 6)] for t, _ in decisions]
     assert firsts == [[10, 10, 10], [10, 10, 20], [30, 30, 30]]
     assert not decisions[2][0][0, 9:].any()
-    # no state carried over: the new episode's Q-values are those of a fresh actor's first
-    loaded = DQN.load(tmp_path / 'model.zip', device='cpu')
-    assert isinstance(loaded.q_net.features_extractor, RecurrentCnn)
-    fresh = loaded.q_net(th.as_tensor(np.asarray(decisions[2][0])))
-    assert th.allclose(fresh, model.q_net(decisions[2][0]), atol=1e-6)
-    # the ONNX export carries the window as its input and gives the same Q-values
+    # a Q head of one linear layer, as NatureCNN's (not SB3's 64-64 default for other extractors)
+    assert [type(layer) for layer in model.q_net.q_net] == [th.nn.Linear]
+    # no state carried over: a fresh actor's first decision on the frame sees the same window
+    # and gives the same Q-values as the new episode's, after two decisions of another episode
+    from nav_gym.policy.actors import DQNActor
+    fresh = DQNActor(tmp_path / 'model.zip')
+    seen = []
+    network = fresh.model.q_net
+    fresh.model.q_net = lambda tensor: seen.append(tensor.clone()) or network(tensor)
+    fresh.begin_episode(7)
+    action, q_values = fresh.act(np.full((3, 84, 84), 30, np.uint8))
+    assert th.equal(seen[0], decisions[2][0]) and action == decisions[2][1]
+    assert np.allclose(q_values, model.q_net(decisions[2][0]).detach().numpy()[0], atol=1e-5)
+    # the ONNX export carries the window as its input and gives the same actions and Q-values
     exported = export_policy(tmp_path / 'model.zip', tmp_path / 'export')
     assert exported.meta['input']['shape'] == [1, 12, 84, 84]
     onnx = OnnxActor(exported)
     onnx.begin_episode(1)
-    frames = [np.full((3, 84, 84), value, np.uint8) for value in (10, 20)]
-    first = onnx.act(frames[0])
-    assert first[0] == decisions[0][1]
-    assert np.allclose(first[1], loaded.q_net(decisions[0][0]).detach().numpy()[0], atol=1e-4)
+    for value, (window_in, chosen) in zip((10, 20), decisions, strict=False):
+        action, q_values = onnx.act(np.full((3, 84, 84), value, np.uint8))
+        assert action == chosen
+        assert np.allclose(q_values, network(window_in).detach().numpy()[0], atol=1e-4)

@@ -151,8 +151,10 @@ def test_a_namespace_is_taken_from_the_root_as_a_node_takes_it():
     # a relative namespace once reached the sim's `-r __ns:=robot1`, which rcl refuses
     assert [TrainConfig(namespace=ns).namespace for ns in ('', '/', 'robot1', '/robot1/',
                                                            'a/b_2')] == [
-        '', '', '/robot1', '/robot1', '/a/b_2']
+        '', '/', '/robot1', '/robot1', '/a/b_2']  # '/': the root, '': a fresh one for a sim
     assert TrainConfig(namespace='robot1').env_config().namespace == '/robot1'
+    assert [env.namespace for env in TrainConfig(namespace='/', n_envs=2).env_configs()] == [
+        '/env0', '/env1']  # was '//env0', which ROS refused
     assert node_ros_args('robot1') == ['--ros-args', '-r', '__ns:=/robot1']
 
 
