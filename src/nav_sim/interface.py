@@ -83,8 +83,7 @@ def absolute_namespace(namespace: str) -> str:
     if namespace in ('', '/'):
         return namespace
     tokens = namespace.strip('/').split('/')
-    bad = next((token for token in tokens if not _TOKEN.fullmatch(token)), None)
-    if bad is not None or '//' in namespace:
+    if '//' in namespace or not all(_TOKEN.fullmatch(token) for token in tokens):
         raise ValueError(f'{namespace!r} is not a ROS namespace: tokens of letters, digits and '
                          f"'_' that do not start with a digit, separated by '/' (e.g. /robot1)")
     return ''.join(f'/{token}' for token in tokens)

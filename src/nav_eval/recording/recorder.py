@@ -111,7 +111,10 @@ class BagRecorder:
         # Foxglove layout use; otherwise under their fully resolved names
         self.root_names = root_names
         self._extra: dict[str, Connection] = {}  # topics given to write(), by name
-        self.namespace = '/' + namespace.strip('/') if namespace.strip('/') else ''
+        try:  # the graph's one namespace rule; the root is '' here (names are joined to it)
+            self.namespace = interface.absolute_namespace(namespace).rstrip('/')
+        except ValueError as exc:
+            raise RecordingError(str(exc)) from None
         if self.path.exists():
             raise RecordingError(f'{self.path} exists already; rosbag2 bags are never '
                                  'overwritten: choose a new output directory or remove it')
