@@ -61,10 +61,11 @@ class SimClient:
 
         Every wait is bounded by ``timeout`` seconds.  ``cmd_vel_stamped`` sends ``cmd_vel`` as
         TwistStamped (the sim's setting of the same name must agree: :meth:`wait_for_sim` says
-        so if it does not).
+        so if it does not).  ``namespace`` follows :func:`nav_sim.interface.absolute_namespace`:
+        ``robot1`` is ``/robot1``, and a name ROS would refuse raises ValueError in one line.
         """
         self.cmd_vel_stamped = cmd_vel_stamped
-        self.namespace = namespace.rstrip('/')
+        self.namespace = interface.absolute_namespace(namespace)  # the graph's one rule
         self.timeout = timeout
         # its own context without signal handlers (the application owns Ctrl-C), a bare node
         self.context, self.node = own_node(node_name, self.namespace)

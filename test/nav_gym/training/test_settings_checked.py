@@ -158,6 +158,19 @@ def test_a_namespace_is_taken_from_the_root_as_a_node_takes_it():
     assert node_ros_args('robot1') == ['--ros-args', '-r', '__ns:=/robot1']
 
 
+def test_a_sim_client_names_its_namespace_by_the_same_rule():
+    from nav_sim.ros.client import SimClient
+
+    for given, named in (('robot1', '/robot1'), ('/robot1/', '/robot1'), ('/', '/'), ('', '')):
+        client = SimClient(given, timeout=1.0)  # was 'robot1', and '/' became ''
+        try:
+            assert (client.namespace, client.node.get_namespace()) == (named, named or '/')
+        finally:
+            client.close()
+    with pytest.raises(ValueError, match="'1robot' is not a ROS namespace"):
+        SimClient('1robot')  # before any context or node is made
+
+
 def test_a_bad_value_from_the_installed_command_is_one_line_and_nothing_is_written(tmp_path):
     result = subprocess.run([TRAIN, '--runs-dir', str(tmp_path / 'runs'), '--learning-rate',
                              '-1', '--total-timesteps', '300'], capture_output=True, text=True,
