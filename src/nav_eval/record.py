@@ -61,7 +61,7 @@ def main(args: list[str] | None = None) -> None:
                                    topics=WITH_POLICY, cmd_vel_stamped=options.cmd_vel_stamped)
         except RecordingError as exc:
             raise SystemExit(f'{PROG}: {exc}') from None
-        print(f'{PROG}: recording {recorder.namespace or "/"} into {options.output} '
+        print(f'{PROG}: recording {recorder.namespace} into {options.output} '
               '(Ctrl-C to stop)', flush=True)
         failure = None
         try:

@@ -87,3 +87,13 @@ def absolute_namespace(namespace: str) -> str:
         raise ValueError(f'{namespace!r} is not a ROS namespace: tokens of letters, digits and '
                          f"'_' that do not start with a digit, separated by '/' (e.g. /robot1)")
     return ''.join(f'/{token}' for token in tokens)
+
+
+def full_name(namespace: str, name: str) -> str:
+    """Return ``name`` joined under ``namespace`` by :func:`absolute_namespace`'s rule.
+
+    ``('/robot1', 'sim')`` and ``('robot1', 'sim')`` give ``'/robot1/sim'``; ``('/', 'sim')``
+    and ``('', 'sim')`` give ``'/sim'``: a node's fully qualified name from the graph's
+    namespace and name, or a namespace under another (``env0`` under ``/lab``).
+    """
+    return f"{absolute_namespace(namespace).rstrip('/')}/{name}"

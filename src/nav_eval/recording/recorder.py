@@ -111,8 +111,8 @@ class BagRecorder:
         # Foxglove layout use; otherwise under their fully resolved names
         self.root_names = root_names
         self._extra: dict[str, Connection] = {}  # topics given to write(), by name
-        try:  # the graph's one namespace rule; the root is '' here (names are joined to it)
-            self.namespace = interface.absolute_namespace(namespace).rstrip('/')
+        try:  # the graph's one namespace rule; '' records the root, as '/' does
+            self.namespace = interface.absolute_namespace(namespace) or '/'
         except ValueError as exc:
             raise RecordingError(str(exc)) from None
         if self.path.exists():

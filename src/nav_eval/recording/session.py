@@ -24,7 +24,7 @@ def wait_until_stopped(recorder: BagRecorder, stop: StopRequest,
     Says once when the sim's publishers are matched, or after ``NOTICE_S`` that none are, and
     once when a message of every per-period topic has arrived (the sim delivers to the bag).
     """
-    where = recorder.namespace or '/'
+    where = recorder.namespace
     start = time.monotonic()
     deadline = None if duration is None else start + duration
     found = hinted = receiving = False

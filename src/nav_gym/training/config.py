@@ -34,6 +34,7 @@ from nav_sim.core.config import (
 )
 from nav_sim.core.world_file import world_settings
 from nav_sim.errors import ConfigError
+from nav_sim.interface import full_name
 from nav_sim.paths import plain_name_problem
 from nav_sim.ros.process import typed_params
 
@@ -204,7 +205,7 @@ class TrainConfig:
         if self.n_envs == 1:
             return [self.env_config()]
         return [self.env_config(sim='embedded',
-                                namespace=f"{self.namespace.rstrip('/')}/env{i}"
+                                namespace=full_name(self.namespace, f'env{i}')
                                 if self.namespace else '')
                 for i in range(self.n_envs)]
 

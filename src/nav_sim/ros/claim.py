@@ -40,9 +40,9 @@ from rclpy.node import Node
 from std_msgs.msg import String
 
 from nav_sim.errors import SimInUseError, SimUnavailableError
-from nav_sim.interface import CLAIM_TOPIC, CONTROLLER_TOPIC
+from nav_sim.interface import CLAIM_TOPIC, CONTROLLER_TOPIC, full_name
 from nav_sim.ros import qos
-from nav_sim.ros.sim_graph import UNKNOWN_NODE, full_name
+from nav_sim.ros.sim_graph import UNKNOWN_NODE
 
 RECHECK_S = 1.0    # how often the sim looks for claims whose publisher has gone
 FRESH_S = 5.0      # a claim just heard counts as live before the graph names its publisher

@@ -13,7 +13,7 @@ from collections.abc import Collection
 from rclpy.node import Node
 
 from nav_sim.errors import SimConflictError
-from nav_sim.interface import CMD_VEL_TOPIC, IMAGE_TOPIC, RESET_SERVICE, cmd_vel_type
+from nav_sim.interface import CMD_VEL_TOPIC, IMAGE_TOPIC, RESET_SERVICE, cmd_vel_type, full_name
 
 #: how a refusal for this reason begins (a reset response message, an exception message)
 CONFLICT = 'several sims in one namespace'
@@ -84,8 +84,3 @@ def refuse_cmd_vel_mismatch(node: Node, stamped: bool, where: str) -> None:
     problem = cmd_vel_mismatch(node, stamped, among=sim_nodes(node))
     if problem:
         raise SimConflictError(f'nav_sim in {where}: {problem}')
-
-
-def full_name(namespace: str, name: str) -> str:
-    """Return a node's fully qualified name from its namespace and name."""
-    return f"{namespace.rstrip('/')}/{name}"

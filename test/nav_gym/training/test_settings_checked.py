@@ -171,6 +171,24 @@ def test_a_sim_client_names_its_namespace_by_the_same_rule():
         SimClient('1robot')  # before any context or node is made
 
 
+def test_a_name_under_a_namespace_is_joined_by_the_same_rule(tmp_path):
+    from nav_eval.recording.recorder import BagRecorder
+    from nav_sim.interface import full_name
+
+    # the graph's node names, the envs' namespaces and the recorder once joined names each
+    # their own way ('robot1' gave 'robot1/sim', and the recorder named the root '')
+    assert [full_name(ns, 'sim') for ns in ('/robot1', 'robot1', '/robot1/', '/', '')] == [
+        '/robot1/sim', '/robot1/sim', '/robot1/sim', '/sim', '/sim']
+    assert [env.namespace for env in TrainConfig(namespace='lab', n_envs=2).env_configs()] == [
+        '/lab/env0', '/lab/env1']
+    for given, named in (('', '/'), ('/', '/'), ('robot1/', '/robot1')):
+        recorder = BagRecorder(tmp_path / f'bag{len(named)}{len(given)}', given)
+        try:
+            assert recorder.namespace == named
+        finally:
+            recorder.close()
+
+
 def test_a_bad_value_from_the_installed_command_is_one_line_and_nothing_is_written(tmp_path):
     result = subprocess.run([TRAIN, '--runs-dir', str(tmp_path / 'runs'), '--learning-rate',
                              '-1', '--total-timesteps', '300'], capture_output=True, text=True,
