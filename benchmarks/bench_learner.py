@@ -58,8 +58,11 @@ from nav_gym.policy.history import action_planes  # noqa: E402
 from nav_gym.training import config as train_config  # noqa: E402
 from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy  # noqa: E402
 from nav_gym.training.run_dir import SUMMARY  # noqa: E402
-from nav_gym.training.spec import COMPONENTS, LearnerSpec  # noqa: E402
+from nav_gym.training.spec import LearnerSpec  # noqa: E402
 from nav_sim.core.depth import DEPTH_KEY, DEPTH_RANGE, DEPTH_SHAPE  # noqa: E402
+
+#: the workshop's learner, SB3's DQN exactly: learner A, as nav-gym-train --config trains it
+WORKSHOP = Path(__file__).resolve().parents[1] / 'config' / 'workshop.yaml'
 
 #: where a gradient step's time goes: a name -> the calls whose cumulative time it is
 PHASES = {'sampling': ('buffers.py', 'sample'),
@@ -320,10 +323,10 @@ def main() -> None:
     args = parser.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
-    learner_keys = {f.name for f in dataclasses.fields(LearnerSpec)}
+    workshop = train_config.load_yaml(WORKSHOP)  # SB3's DQN: every learner setting of A
+    learner_keys = {f.name for f in dataclasses.fields(LearnerSpec)} | set(workshop)
     common = [s for s in args.set if s.split('=')[0] not in learner_keys]  # both learners'
-    vanilla = ['double_q=false', *(f'{k}={str(v).lower()}' for k, v in
-                                   COMPONENTS.items())]
+    vanilla = [f'{k}={str(v).lower()}' for k, v in workshop.items()]
     flags = {'vanilla DQN (SB3)': [*common, *vanilla], 'chosen': args.set}
     configs = {name: train_config.build(None, dict(s.split('=', 1) for s in settings))
                for name, settings in flags.items()}

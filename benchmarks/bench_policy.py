@@ -75,14 +75,17 @@ def untrained_run(folder: Path) -> Path:
     import gymnasium as gym
 
     from nav_gym.training.learner import learner_class, learner_kwargs, learner_policy
-
-    class Spaces(gym.Env):
-        observation_space = gym.spaces.Box(0, 255, (3, 84, 84), np.uint8)
-        action_space = gym.spaces.Discrete(3)
+    from nav_gym.training.memory import stacked_space
 
     config = TrainConfig()
     (folder / 'config.yaml').write_text(config.to_yaml())
     learner = config.learner()
+
+    class Spaces(gym.Env):  # the network's input: the default learner's stack
+        observation_space = stacked_space(gym.spaces.Box(0, 255, (3, 84, 84), np.uint8),
+                                          learner.frame_stack, 3 * learner.previous_action)
+        action_space = gym.spaces.Discrete(3)
+
     model = learner_class(None, learner)(learner_policy(learner), Spaces(), buffer_size=10,
                                          device='cpu', **learner_kwargs(learner, config.gamma))
     model.save(folder / FINAL_MODEL)

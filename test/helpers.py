@@ -70,6 +70,17 @@ def interrupt(process: subprocess.Popen, timeout: float = 15.0) -> tuple[int, st
     return process.returncode, (out or '') + (err or '')
 
 
+def learner_env(spaces_only: type, learner):  # noqa: ANN001, ANN201
+    """Return an env with only the spaces for ``learner``: in the agent's stacks with memory."""
+    if not learner.memory:
+        return spaces_only()
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from nav_gym.training.memory import FrameStackEnv
+    return FrameStackEnv(DummyVecEnv([spaces_only]), learner.frame_stack,
+                         learner.previous_action)  # on the agent's side, as training has it
+
+
 def make_tiny_run(path, spaces_only: type, steps: int = 32, **settings: object):  # noqa: ANN201
     """Write a run directory at ``path`` with a tiny model of the default learner; return it.
 
@@ -83,16 +94,10 @@ def make_tiny_run(path, spaces_only: type, steps: int = 32, **settings: object):
     config = TrainConfig(**settings)
     (path / 'config.yaml').write_text(config.to_yaml())
     learner = config.learner()
-    env = spaces_only()
-    if learner.memory:  # the agent's stacks, on its side of the env (as training)
-        from stable_baselines3.common.vec_env import DummyVecEnv
-
-        from nav_gym.training.memory import FrameStackEnv
-        env = FrameStackEnv(DummyVecEnv([spaces_only]), learner.frame_stack,
-                            learner.previous_action)
     model = learner_class(None, learner)(
-        learner_policy(learner), env, buffer_size=64, learning_starts=16, batch_size=8,
-        seed=3, device='cpu', **learner_kwargs(learner, config.gamma))
+        learner_policy(learner), learner_env(spaces_only, learner), buffer_size=64,
+        learning_starts=16, batch_size=8, seed=3, device='cpu',
+        **learner_kwargs(learner, config.gamma))
     (path / 'checkpoints').mkdir()
     model.learn(steps)
     model.save(path / 'checkpoints' / f'dqn_{steps}_steps.zip')

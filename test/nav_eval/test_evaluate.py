@@ -58,8 +58,10 @@ def test_the_exploring_diagnosis_is_the_greedy_policy_plus_seeded_random_actions
     model = run_dir / 'final_model.zip'
     obs = np.random.default_rng(0).integers(0, 256, (3, 84, 84), dtype=np.uint8)
     never, always = ExploringDQNPolicy(model, 0.0), ExploringDQNPolicy(model, 1.0)
+    greedy = DQNPolicy(model)
     never.begin_episode(201)
-    assert [never.act(obs) for _ in range(5)] == [DQNPolicy(model).act(obs)] * 5
+    greedy.begin_episode(201)  # the default learner's memory: the same history, step by step
+    assert [never.act(obs) for _ in range(5)] == [greedy.act(obs) for _ in range(5)]
 
     def actions(seed: int) -> list[int]:
         always.begin_episode(seed)

@@ -116,7 +116,8 @@ def test_smoke_training_checkpoints_resumes_and_loads(tmp_path):
     from stable_baselines3 import DQN
     model = DQN.load(run_dir / 'final_model.zip', device='cpu')
     assert model.num_timesteps == steps[-1]
-    action, _ = model.predict(np.zeros((3, 84, 84), np.uint8), deterministic=True)
+    action, _ = model.predict(np.zeros(model.observation_space.shape, np.uint8),
+                              deterministic=True)  # the default learner's stack
     assert int(action) in (0, 1, 2)
 
     corrupt = checkpoints(run_dir)[-1][1]
@@ -205,7 +206,7 @@ def test_the_workshop_config_is_sb3_dqn_exactly_and_sets_only_the_learner():
     path = REPO / 'config' / 'workshop.yaml'
     config = build(str(path), {})
     assert config.learner().vanilla and not TrainConfig().learner().vanilla
-    assert set(yaml.safe_load(path.read_text())) <= {'double_q', *COMPONENTS}
+    assert set(yaml.safe_load(path.read_text())) <= {'double_q', 'gradient_steps', *COMPONENTS}
 
 
 def test_train_yaml_holds_every_default():

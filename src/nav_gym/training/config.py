@@ -49,9 +49,9 @@ def vector_schedule(train_freq: int, gradient_steps: int, n_envs: int) -> tuple[
     """Return SB3's ``(train_freq, gradient_steps)`` that keep the replay ratio with N envs.
 
     SB3 counts ``train_freq`` in vector steps (N env steps each).  The ratio of gradient steps
-    to env steps, ``gradient_steps / train_freq``, stays the configured one: with the default
-    1/4, two envs update once every 2 vector steps, four envs once every step, eight envs twice
-    every step.  One env keeps the configured pair as it is.
+    to env steps, ``gradient_steps / train_freq``, stays the configured one: with SB3's 1/4
+    (``gradient_steps: 1``), two envs update once every 2 vector steps, four envs once every
+    step, eight envs twice every step.  One env keeps the configured pair as it is.
     """
     if n_envs == 1:
         return train_freq, gradient_steps
@@ -73,7 +73,11 @@ def _learner(name: str) -> Any:
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """The learner on Monitor(NavigationEnv): Double DQN, 3-step returns, the workshop settings."""
+    """The learner on Monitor(NavigationEnv): :class:`LearnerSpec`'s, at the workshop settings.
+
+    Double DQN targets, 3-step returns, a 4-frame stack with the previous action, and resets
+    every 20,000 steps at two gradient steps per update; config/workshop.yaml is the workshop's.
+    """
 
     total_timesteps: int = setting(50_000, 'environment steps to train for', AT_LEAST_ONE)
     learning_rate: float = setting(1e-4, 'optimiser step size', POSITIVE)
@@ -84,7 +88,9 @@ class TrainConfig:
     gamma: float = setting(0.99, 'discount factor', Bounds(0.0, 1.0, low_open=True))
     train_freq: int = setting(4, 'environment steps between gradient updates (SB3 default)',
                               AT_LEAST_ONE)
-    gradient_steps: int = setting(1, 'gradient steps per update (SB3 default)', AT_LEAST_ONE)
+    gradient_steps: int = setting(2, "gradient steps per update: a replay ratio twice SB3's "
+                                  "default (1), with reset_interval's resets (Nikishin et al. "
+                                  '2022)', AT_LEAST_ONE)
     target_update_interval: int = setting(1_000, 'steps between target-network updates',
                                           AT_LEAST_ONE)
     exploration_fraction: float = setting(0.25, 'fraction of training over which epsilon decays',

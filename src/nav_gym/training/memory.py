@@ -38,8 +38,16 @@ def stacked_space(space: spaces.Box, k: int, n_actions: int = 0) -> spaces.Box:
 
 
 def frame_space(space: spaces.Box, k: int, n_actions: int = 0) -> spaces.Box:
-    """Return the space of one frame of a ``k``-frame stack's ``space``."""
+    """Return the space of one frame of a ``k``-frame stack's ``space``.
+
+    Raises ValueError when ``space`` is no such stack (an env not wrapped in the agent's
+    :class:`FrameStackEnv`).
+    """
     channels = (space.shape[0] - n_actions) // k
+    if channels < 1 or channels * k + n_actions != space.shape[0]:
+        raise ValueError(f'observations of shape {space.shape} are not {k}-frame stacks with '
+                         f'{n_actions} action planes: a learner with memory acts on the '
+                         'FrameStackEnv of its envs (nav_gym.training.memory)')
     return spaces.Box(space.low[:channels], space.high[:channels], dtype=space.dtype)
 
 

@@ -25,6 +25,8 @@ from nav_sim.core.config import (
 COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0, 'augment_colour': 0.0,
               'prioritized_replay': False, 'frame_stack': 1, 'previous_action': False,
               'aux_depth': 0.0, 'munchausen': False, 'reset_interval': 0, 'recurrent': 0}
+#: the memory components (both on by default) turned off: the agent sees the latest frame alone
+WITHOUT_MEMORY = {name: COMPONENTS[name] for name in ('frame_stack', 'previous_action')}
 
 
 @dataclass(frozen=True)
@@ -32,10 +34,12 @@ class LearnerSpec:
     """Which learner a run trains: the TD target and the components (TrainConfig's fields).
 
     Each component has a published basis and is off at its value in :data:`COMPONENTS`.  The
-    default learner is SB3's DQN with Double DQN targets and 3-step returns (adopted in
-    docs/experiments.md); every component off is SB3's DQN with Double DQN targets, and
-    ``double_q: false`` with every component off is SB3's DQN untouched, the workshop's learner
-    (config/workshop.yaml).  :mod:`nav_gym.training.learner` builds it.
+    default learner is SB3's DQN with Double DQN targets, 3-step returns, a 4-frame stack with
+    the previous action, and resets every 20,000 steps at TrainConfig's replay ratio of 2
+    (``gradient_steps``; each adopted in docs/experiments.md); every component off is SB3's
+    DQN with Double DQN targets, and ``double_q: false`` with every component off is SB3's DQN
+    untouched, the workshop's learner (config/workshop.yaml, which also sets
+    ``gradient_steps: 1``).  :mod:`nav_gym.training.learner` builds it.
     """
 
     double_q: bool = setting(True, 'Double DQN targets (van Hasselt et al. 2016): the online '
@@ -55,12 +59,12 @@ class LearnerSpec:
                                     'stack alike; 0: off', Bounds(0.0, 1.0, high_open=True))
     prioritized_replay: bool = setting(False, 'proportional prioritized replay with importance '
                                        'weights (Schaul et al. 2016)')
-    frame_stack: int = setting(1, "the agent's memory: its last k camera frames stacked, the "
+    frame_stack: int = setting(4, "the agent's memory: its last k camera frames stacked, the "
                                "episode's first frame standing in before its start, rebuilt "
                                'from a replay buffer of single frames (DRQN, Hausknecht & Stone '
                                '2015, compare a recurrence with a stack of the same length); '
                                '1: the frame alone', Bounds(1, 16))
-    previous_action: bool = setting(False, "the agent's memory of what it did: the action that "
+    previous_action: bool = setting(True, "the agent's memory of what it did: the action that "
                                     'led to the latest frame as one-hot input planes after the '
                                     'frames, none at an episode start (Mirowski et al. 2017)')
     aux_depth: float = setting(0.0, 'weight of an auxiliary loss: a linear head on the online '
@@ -72,7 +76,7 @@ class LearnerSpec:
                                "the scaled log-policy of the action taken (the target network's "
                                'softmax, tau 0.03, alpha 0.9, clip -1), bootstraps from the soft '
                                'value, and replaces Double DQN (set double_q: false)')
-    reset_interval: int = setting(0, 'every this many env steps, re-initialise the fully '
+    reset_interval: int = setting(20_000, 'every this many env steps, re-initialise the fully '
                                   'connected layers of the online Q-network (the convolutions '
                                   'kept) and forget their optimiser state: resets against the '
                                   'primacy bias, which allow a higher replay ratio '
@@ -97,8 +101,9 @@ class LearnerSpec:
             raise TrainConfigError('recurrent reads the frame_stack window: set frame_stack to '
                                    '2 or more')
         if self.memory and self.prioritized_replay:
-            raise TrainConfigError('prioritized_replay and memory (frame_stack > 1, '
-                                   'previous_action) do not combine yet: set one of them')
+            raise TrainConfigError('prioritized_replay does not combine with memory yet '
+                                   '(frame_stack > 1, previous_action: the default has both): '
+                                   'set frame_stack: 1 and previous_action: false with it')
 
     @property
     def memory(self) -> bool:

@@ -21,6 +21,7 @@ import yaml
 from helpers import wait_until
 from nav_eval.sweeps.report import SECTIONS
 from nav_eval.sweeps.trial import train_args
+from nav_gym.training.run_dir import LEGACY_DEFAULTS
 
 TINY = ['--total-timesteps', '200', '--set', 'learning_starts=100', '--set', 'checkpoint_freq=100',
         '--set', 'buffer_size=500', '--set', 'max_episode_steps=12', '--train-seeds', '101-102',
@@ -519,5 +520,5 @@ def test_a_summary_whose_settings_do_not_load_here_groups_by_them_as_saved(tmp_p
     trials = read_exported(exported_dirs(tmp_path))
     assert [t['name'] for t in trials] == ['s:seed1']  # the same trial twice: once
     # the values of its time (run_settings) fill what it does not name
-    assert trials[0]['settings'] == {'learning_rate': -1.0, 'double_q': False, 'n_steps': 1}
+    assert trials[0]['settings'] == {'learning_rate': -1.0, **LEGACY_DEFAULTS}
     assert 's: the settings of c do not load here' in capsys.readouterr().out

@@ -25,6 +25,7 @@ from nav_gym.policy.actors import DQNActor, load_policy
 from nav_gym.policy.config import PolicyConfig
 from nav_gym.policy.export import export_policy
 from nav_gym.policy.exported import META_FILE, ONNX_FILE, OnnxActor, read_export
+from nav_gym.training.spec import WITHOUT_MEMORY
 from nav_sim.core.config import HELDOUT, TRAIN, SimConfig
 from nav_sim.core.sim import NavSim
 from nav_sim.paths import executable_path
@@ -77,7 +78,8 @@ def test_the_export_takes_a_uint8_observation_and_says_what_the_node_needs(run, 
     (observation,) = graph.input
     assert observation.name == 'observation'
     assert observation.type.tensor_type.elem_type == onnx.TensorProto.UINT8
-    assert [d.dim_value for d in observation.type.tensor_type.shape.dim] == [1, 3, 84, 84]
+    # the default learner's input: a 4-frame stack and the previous action's 3 planes
+    assert [d.dim_value for d in observation.type.tensor_type.shape.dim] == [1, 15, 84, 84]
     assert [o.name for o in graph.output] == ['q_values']
     meta = json.loads((export / META_FILE).read_text())
     assert meta['actions'] == [[0.03, 0.75], [0.2, 0.0], [0.03, -0.75]]
@@ -93,9 +95,13 @@ def test_onnx_q_values_equal_pytorchs_on_200_observations_from_both_banks(
     torch_actor = DQNActor(run / 'final_model.zip')
     onnx_actor = OnnxActor(read_export(export))
     import torch
+    inputs = []
+    for obs in bank_observations:  # each an episode's first frame, as the memory stacks it
+        torch_actor.memory.begin_episode()
+        inputs.append(torch_actor.memory.observe(obs))
     with torch.no_grad():
-        expected = torch_actor.model.q_net(torch.as_tensor(bank_observations)).numpy()
-    got = np.stack([onnx_actor.q_values(obs) for obs in bank_observations])
+        expected = torch_actor.model.q_net(torch.as_tensor(np.stack(inputs))).numpy()
+    got = np.stack([onnx_actor.q_values(network_input) for network_input in inputs])
     assert np.abs(got - expected).max() <= 1e-4
     ordered = np.sort(expected, axis=1)
     clear = ordered[:, -1] - ordered[:, -2] > 1e-4  # where the best action is not a tie
@@ -105,7 +111,7 @@ def test_onnx_q_values_equal_pytorchs_on_200_observations_from_both_banks(
 
 @pytest.mark.parametrize('flags', [
     {'double_q': False, 'n_steps': 1}, {'dueling': True}, {'augment_shift': 4},
-    {'augment_colour': 0.2}, {'prioritized_replay': True}])
+    {'augment_colour': 0.2}, {'prioritized_replay': True, **WITHOUT_MEMORY}])
 def test_every_learner_flag_exports(tmp_path, spaces_only, flags):
     run = make_tiny_run(tmp_path, spaces_only, steps=16, **flags)
     spec = export_policy(run)
@@ -120,7 +126,8 @@ def test_every_learner_flag_exports(tmp_path, spaces_only, flags):
 
 
 @pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
-@pytest.mark.parametrize('flags', [{'frame_stack': 3}, {'previous_action': True},
+@pytest.mark.parametrize('flags', [{'frame_stack': 3, 'previous_action': False},
+                                   {'frame_stack': 1, 'previous_action': True},
                                    {'frame_stack': 2, 'previous_action': True}])
 def test_a_memory_learner_exports_and_acts_as_its_checkpoint_across_episodes(
         tmp_path, spaces_only, flags):

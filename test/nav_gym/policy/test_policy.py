@@ -87,10 +87,12 @@ def test_a_checkpoint_in_a_run_acts_as_its_run_and_a_bare_one_as_the_defaults(ru
 def test_the_greedy_action_is_what_predict_takes_and_comes_with_its_q_values(run):
     actor, _ = load_policy(PolicyConfig(model=str(run)))
     rng = np.random.default_rng(0)
+    actor.begin_episode(0)
     for _ in range(5):
         obs = rng.integers(0, 256, (3, 84, 84), dtype=np.uint8)
         action, q_values = actor.act(obs)
-        predicted, _ = actor.model.predict(obs, deterministic=True)
+        network_input = actor.memory.history.observation()  # the default learner's stack
+        predicted, _ = actor.model.predict(network_input, deterministic=True)
         assert action == int(predicted) == int(np.argmax(q_values)) and len(q_values) == 3
 
 

@@ -11,6 +11,7 @@ from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import NStepReplayBuffer
 
+from helpers import learner_env
 from nav_gym.training.config import TrainConfig
 from nav_gym.training.learner import (
     DuelingCnnPolicy,
@@ -24,7 +25,7 @@ from nav_gym.training.learner import (
     learner_policy,
     load_checkpoint,
 )
-from nav_gym.training.spec import COMPONENTS, LearnerSpec
+from nav_gym.training.spec import COMPONENTS, WITHOUT_MEMORY, LearnerSpec
 from nav_gym.training.targets import double_q_target, max_q_target, munchausen_target
 from nav_sim.core.depth import DEPTH_SHAPE
 
@@ -70,11 +71,13 @@ def test_the_munchausen_target_adds_the_clipped_log_policy_and_a_soft_value():
                        max_q_target(rewards, dones, 0.9, next_q), atol=1e-3)
 
 
-def test_double_dqn_with_3_step_returns_is_the_default_and_sb3_dqn_is_one_file_away():
-    assert TrainConfig().double_q is True and TrainConfig().n_steps == 3
+def test_the_adopted_learner_is_the_default_and_sb3_dqn_is_one_file_away():
+    config = TrainConfig()  # Double DQN, 3-step returns, L5's memory, replay ratio and resets
+    assert (config.double_q, config.n_steps, config.frame_stack, config.previous_action,
+            config.gradient_steps, config.reset_interval) == (True, 3, 4, True, 2, 20_000)
     assert TrainConfig().learner() == LearnerSpec()
     assert learner_class(None, LearnerSpec()) is Learner
-    vanilla = TrainConfig(double_q=False, n_steps=1).learner()  # config/workshop.yaml
+    vanilla = TrainConfig(double_q=False, **COMPONENTS).learner()  # config/workshop.yaml
     assert vanilla.vanilla and learner_class(None, vanilla) is DQN  # SB3's own, untouched
     assert learner_kwargs(vanilla, 0.99) == {} and learner_policy(vanilla) == 'CnnPolicy'
     assert issubclass(learner_class(object(), LearnerSpec()), Learner)  # timed, too
@@ -86,12 +89,15 @@ def test_every_component_has_a_flag_and_a_value_that_turns_it_off():
     spec = LearnerSpec()
     assert (spec.n_steps, spec.dueling, spec.augment_shift, spec.prioritized_replay) == (
         3, False, 0, False)  # n-step returns adopted (docs/experiments.md), the others off
-    assert spec.describe() == ('DQN (SB3) with Double DQN targets (van Hasselt et al. 2016), '
-                               '3-step returns')
+    assert spec.describe() == (
+        'DQN (SB3) with Double DQN targets (van Hasselt et al. 2016), 3-step returns, a 4-frame '
+        'stack (Hausknecht & Stone 2015), the previous action as input (Mirowski et al. 2017), '
+        'resets of the fully connected layers every 20000 steps (Nikishin et al. 2022)')
     off = LearnerSpec(**COMPONENTS)
     assert off.describe() == 'DQN (SB3) with Double DQN targets (van Hasselt et al. 2016)'
     assert dataclasses.replace(off, double_q=False).vanilla
-    full = LearnerSpec(n_steps=3, dueling=True, augment_shift=4, prioritized_replay=True)
+    full = LearnerSpec(n_steps=3, dueling=True, augment_shift=4, prioritized_replay=True,
+                       **WITHOUT_MEMORY)
     for part in ('Double DQN', '3-step returns', 'dueling head', 'up to 4 px', 'prioritized'):
         assert part in full.describe()
     for name in ('n_steps', 'dueling', 'augment_shift', 'prioritized_replay', 'priority_alpha',
@@ -198,19 +204,21 @@ def test_priorities_follow_td_errors_and_weights_correct_the_sampling():
 # --- the learner trains, saves and loads --------------------------------------------------------
 @pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')  # SB3's own, on any n-step load
 @pytest.mark.parametrize('spec', [LearnerSpec(), LearnerSpec(augment_shift=4, n_steps=3),
-                                  LearnerSpec(dueling=True, prioritized_replay=True),
+                                  LearnerSpec(dueling=True, prioritized_replay=True,
+                                              **WITHOUT_MEMORY),
                                   LearnerSpec(double_q=False, munchausen=True),
                                   LearnerSpec(augment_colour=0.2)],
                          ids=['default', 'shift+nstep', 'dueling+per', 'munchausen', 'colour'])
 def test_a_checkpoint_of_the_learner_loads_with_dqn_load(tmp_path, spaces_only, spec):
-    model = learner_class(None, spec)(learner_policy(spec), spaces_only(), buffer_size=200,
+    env = learner_env(spaces_only, spec)
+    model = learner_class(None, spec)(learner_policy(spec), env, buffer_size=200,
                                       learning_starts=40, batch_size=8, train_freq=4, seed=1,
                                       device='cpu', **learner_kwargs(spec, 0.99))
     model.learn(120)
     assert model._n_updates > 0
     model.save(tmp_path / 'model.zip')
     loaded = DQN.load(tmp_path / 'model.zip', device='cpu')
-    obs = spaces_only().reset()[0]
+    obs = env.reset()[0]  # a VecEnv's first: the default learner's stack
     assert loaded.predict(obs, deterministic=True)[0] == model.predict(obs, deterministic=True)[0]
     resumed = load_checkpoint(tmp_path / 'model.zip', spec, device='cpu')
     assert isinstance(resumed, Learner) and resumed.learner == spec

@@ -6,15 +6,19 @@ import pytest
 import torch as th
 from torch import nn
 
+from helpers import learner_env
 from nav_gym.training.learner import Learner, learner_class, learner_kwargs, learner_policy
 from nav_gym.training.resets import reset_fully_connected
 from nav_gym.training.spec import LearnerSpec
 
 
 def _model(spaces_only, spec: LearnerSpec) -> Learner:
-    env = spaces_only()
-    env.observation_space.seed(0)  # the same frames in every run
-    return learner_class(None, spec)(learner_policy(spec), env, buffer_size=200,
+    def seeded():  # noqa: ANN202
+        env = spaces_only()
+        env.observation_space.seed(0)  # the same frames in every run
+        return env
+    return learner_class(None, spec)(learner_policy(spec), learner_env(seeded, spec),
+                                     buffer_size=200,
                                      learning_starts=40, batch_size=8, train_freq=4, seed=1,
                                      device='cpu', **learner_kwargs(spec, 0.99))
 
@@ -67,7 +71,7 @@ def test_resets_come_every_interval_once_learning_has_begun(spaces_only, monkeyp
 def test_resets_keep_the_default_bit_for_bit_and_a_checkpoint_loads(spaces_only, tmp_path):
     from nav_gym.training.learner import load_checkpoint
     runs = {}
-    for spec in (LearnerSpec(), LearnerSpec(reset_interval=1000)):  # none due in 80 steps
+    for spec in (LearnerSpec(reset_interval=0), LearnerSpec(reset_interval=1000)):  # none due
         model = _model(spaces_only, spec)
         model.learn(80)
         runs[spec.reset_interval] = _snapshot(model.q_net)

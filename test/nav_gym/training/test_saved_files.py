@@ -42,7 +42,9 @@ class Frames(gym.Env):
 
 
 def test_a_checkpoint_and_replay_buffer_saved_before_the_move_resume():
-    spec = LearnerSpec(dueling=True, prioritized_replay=True, n_steps=3)
+    # the learner it trained: the default of its time had no memory and no resets
+    spec = LearnerSpec(dueling=True, prioritized_replay=True, n_steps=3, frame_stack=1,
+                       previous_action=False, reset_interval=0)
     model = load_checkpoint(DATA / 'dqn_32_steps.zip', spec, env=Frames(), device='cpu')
     assert isinstance(model, Learner) and isinstance(model.policy, DuelingCnnPolicy)
     assert model.num_timesteps == 32 and model.learner == spec
