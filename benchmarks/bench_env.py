@@ -124,10 +124,11 @@ def dqn_share(steps: int, learning_starts: int, config: EnvConfig
     """(env seconds, wall seconds, steps/s, env share) of a short DQN run through ROS."""
     from stable_baselines3 import DQN
 
-    from nav_gym.training.config import TrainConfig
+    from bench_learner import WORKSHOP
+    from nav_gym.training.config import build
     timer = EnvTimer(NavigationEnv(config))
-    try:
-        kwargs = {**TrainConfig().dqn_kwargs(), 'learning_starts': learning_starts,
+    try:  # SB3's DQN at the workshop's settings (config/workshop.yaml: gradient_steps 1 too)
+        kwargs = {**build(str(WORKSHOP), {}).dqn_kwargs(), 'learning_starts': learning_starts,
                   'buffer_size': max(steps, 1000), 'device': 'cpu'}
         model = DQN('CnnPolicy', timer, verbose=0, **kwargs)
         start = time.perf_counter()

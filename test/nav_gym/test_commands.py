@@ -196,7 +196,7 @@ def test_a_run_saves_its_whole_env_config(tmp_path):
     # it trained SB3's DQN: the default of double_q has changed since, not the run
     assert load_config(tmp_path).double_q is False and TrainConfig().double_q is True
     assert load_config(tmp_path).n_steps == 1 and TrainConfig().n_steps == 3
-    assert load_config(tmp_path).learner().vanilla
+    assert load_config(tmp_path).learner().vanilla and load_config(tmp_path).gradient_steps == 1
 
 
 def test_the_workshop_config_is_sb3_dqn_exactly_and_sets_only_the_learner():
@@ -206,6 +206,7 @@ def test_the_workshop_config_is_sb3_dqn_exactly_and_sets_only_the_learner():
     path = REPO / 'config' / 'workshop.yaml'
     config = build(str(path), {})
     assert config.learner().vanilla and not TrainConfig().learner().vanilla
+    assert (config.gradient_steps, TrainConfig().gradient_steps) == (1, 2)  # SB3's, L5's
     assert set(yaml.safe_load(path.read_text())) <= {'double_q', 'gradient_steps', *COMPONENTS}
 
 

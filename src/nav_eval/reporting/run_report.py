@@ -45,7 +45,7 @@ from nav_gym.training.run_dir import (
     parse_checkpoint_name,
     run_settings,
 )
-from nav_gym.training.spec import learner_of
+from nav_gym.training.spec import LEGACY_DEFAULTS, learner_of
 from nav_sim.core.config import HELDOUT, TRAIN
 
 SECTIONS = ('1. Observation and action checks', '2. Training',
@@ -280,13 +280,16 @@ def default_commands(run: Run, experiments: Path | None = None) -> list[str]:
     """Return the commands that reproduce the run, stage by stage (section 8)."""
     name = Path(run.shown).name
     log = f' --experiments {display_path(experiments)}' if experiments else ''
+    # a config saved before a setting existed: its value then, which today's default is not
+    then = ''.join(f" --{key.replace('_', '-')} {str(value).lower()}"
+                   for key, value in LEGACY_DEFAULTS.items() if key not in (run.config or {}))
     return [f'nav-gym-validate --json {run.shown}/validation.json',
-            f'nav-gym-train --config {run.shown}/config.yaml --run-name {name}_again',
+            f'nav-gym-train --config {run.shown}/config.yaml{then} --run-name {name}_again',
             f'nav-eval-evaluate {run.shown}',
             f'nav-eval-diagnose {run.shown}',
             f'nav-eval-report {run.shown}{log}',
             '# or every stage in one command (ros2 run equivalents: nav_gym train, ...):',
-            f'visnav-pipeline --config {run.shown}/config.yaml --run-name {name}_again']
+            f'visnav-pipeline --config {run.shown}/config.yaml{then} --run-name {name}_again']
 
 
 def evidence(run: Run, experiments: Path | None) -> list[str]:

@@ -39,6 +39,8 @@ from nav_sim.errors import NavSimError
 FINAL_SETS = {TRAIN: 'dqn_train', HELDOUT: 'dqn_heldout'}
 #: a final evaluation's rates, per split (the per-seed rows of results.json)
 RATES = ('success_rate', 'collision_rate', 'timeout_rate', 'mean_spl')
+#: the settings of a summary's configuration that was saved without its settings: only its name
+UNNAMED = 'summary configuration'
 
 
 #: the settings a training config has today
@@ -131,7 +133,7 @@ def _summary_settings(settings: dict[str, Any], row: dict[str, Any], summary: st
     """
     kept = settings.get(row['config'])
     if kept is None:
-        return {'summary configuration': row['config']}
+        return {UNNAMED: row['config']}
     kept = {k: v for k, v in kept.items() if k not in BOOKKEEPING}
     known = {k: v for k, v in kept.items() if k in TRAIN_FIELDS}
     try:

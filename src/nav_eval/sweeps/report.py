@@ -18,7 +18,7 @@ from typing import Any
 
 from nav_eval.analysis import calibration, stats
 from nav_eval.reporting.format import num, pct, table, to_html
-from nav_eval.sweeps.collect import RATES, jsonable
+from nav_eval.sweeps.collect import RATES, UNNAMED, jsonable
 from nav_eval.sweeps.figures import write_figures
 from nav_eval.sweeps.spec import (
     SWEEP_FIGURES,
@@ -82,8 +82,10 @@ def _configurations_markdown(data: dict[str, Any], figures: dict[str, str]) -> l
                             + [_ci(est[a]) for a in stats.AGGREGATES])
     lines += table(['Configuration', 'Held-out', 'Seeds', *stats.AGGREGATES], rows)
     lines += ['The optimality gap of the collision rate is its gap to 0 collisions.', '']
-    lines += ['Learners:', ''] + [f'- `{config}`: {learner_of(settings).describe()}'
-                                  for config, settings in data['settings'].items()] + ['']
+    lines += ['Learners:', ''] + [
+        f'- `{config}`: ' + ('unknown (its summary saved no settings)' if UNNAMED in settings
+                             else learner_of(settings).describe())
+        for config, settings in data['settings'].items()] + ['']
     for key, caption in FIGURES:
         if key in figures:
             lines += [f'## {caption}', '', f'![{caption}]({figures[key]})', '']

@@ -1,11 +1,13 @@
 """The learner: SB3's DQN with Double DQN targets, and the components each flag adds.
 
 The default learner is "DQN (SB3) with Double DQN targets (van Hasselt et al. 2016), 3-step
-returns": SB3's ``DQN`` whose TD target lets the online network pick the next action and the
-target network value it, instead of taking the maximum of the target network's values (which
-overestimates where the actions' true values are close: docs/experiments.md measured it here),
-on SB3's n-step replay buffer.  Each component has a published basis and a flag in
-config/train.yaml (:data:`nav_gym.training.spec.COMPONENTS` holds the value that turns it off);
+returns", a 4-frame stack with the previous action and resets every 20,000 steps at a replay
+ratio of 2 (:class:`nav_gym.training.spec.LearnerSpec`): SB3's ``DQN`` whose TD target lets the
+online network pick the next action and the target network value it, instead of taking the
+maximum of the target network's values (which overestimates where the actions' true values are
+close: docs/experiments.md measured it here), on SB3's n-step replay buffer.  Each component
+has a published basis and a flag in config/train.yaml (:data:`nav_gym.training.spec.COMPONENTS`
+holds the value that turns it off);
 all of them off is the Double DQN learner, and ``double_q: false`` with all of them off is SB3's
 own ``DQN`` untouched (the workshop's learner, bit for bit: config/workshop.yaml).
 
@@ -65,7 +67,7 @@ from nav_gym.training.aux_depth import (
     begin_depths,
     depth_loss,
 )
-from nav_gym.training.memory import FrameStackReplayBuffer
+from nav_gym.training.memory import FrameStackReplayBuffer, refuse_unstacked
 from nav_gym.training.recurrent import recurrent_policy_kwargs
 from nav_gym.training.replay import (  # SumTree: buffers pickled before name it here
     DepthPrioritizedReplayBuffer,
@@ -73,7 +75,7 @@ from nav_gym.training.replay import (  # SumTree: buffers pickled before name it
     SumTree,  # noqa: F401
 )
 from nav_gym.training.resets import reset_fully_connected
-from nav_gym.training.spec import LearnerSpec
+from nav_gym.training.spec import COMPONENTS, LearnerSpec
 from nav_gym.training.targets import double_q_target, max_q_target, munchausen_target
 
 
@@ -130,10 +132,18 @@ class Learner(DQN):
     """
 
     def __init__(self, *args: Any, learner: LearnerSpec | None = None, **kwargs: Any) -> None:
-        """Create SB3's DQN; ``learner`` defaults to the Double DQN learner."""
-        self.learner = learner or LearnerSpec()
+        """Create SB3's DQN; ``learner`` defaults to the Double DQN learner (no component)."""
+        self.learner = learner or LearnerSpec(**COMPONENTS)
         self.resets = 0  # of the fully connected layers so far (reset_interval)
         super().__init__(*args, **kwargs)
+
+    def _setup_model(self) -> None:
+        """SB3's set-up, after checking that a learner with memory sees the agent's stacks."""
+        spec = self.learner
+        if spec.memory:
+            refuse_unstacked(self.observation_space, spec.frame_stack,
+                             int(self.action_space.n) if spec.previous_action else 0)
+        super()._setup_model()
 
     def _on_step(self) -> None:
         """SB3's step bookkeeping, then a reset when one is due (``reset_interval``).

@@ -23,6 +23,7 @@ from gymnasium import spaces
 from stable_baselines3.common.buffers import NStepReplayBuffer
 from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
+from nav_gym.env.observation import OBS_SHAPE
 from nav_gym.policy.history import NO_ACTION, FrameHistory, action_planes, history_positions
 
 
@@ -40,15 +41,26 @@ def stacked_space(space: spaces.Box, k: int, n_actions: int = 0) -> spaces.Box:
 def frame_space(space: spaces.Box, k: int, n_actions: int = 0) -> spaces.Box:
     """Return the space of one frame of a ``k``-frame stack's ``space``.
 
-    Raises ValueError when ``space`` is no such stack (an env not wrapped in the agent's
-    :class:`FrameStackEnv`).
+    Raises ValueError when ``space`` is no such stack (:func:`refuse_unstacked`).
     """
     channels = (space.shape[0] - n_actions) // k
     if channels < 1 or channels * k + n_actions != space.shape[0]:
         raise ValueError(f'observations of shape {space.shape} are not {k}-frame stacks with '
+                         f'{n_actions} action planes')
+    return spaces.Box(space.low[:channels], space.high[:channels], dtype=space.dtype)
+
+
+def refuse_unstacked(space: spaces.Space, k: int, n_actions: int = 0) -> None:
+    """Raise ValueError unless ``space`` is the camera's frames stacked ``k`` deep (+ actions).
+
+    A learner with memory acts on the agent's stacks (:class:`FrameStackEnv`), not on an env's
+    own frames; given those, its replay buffer would split them into frames of the wrong size.
+    """
+    frame = spaces.Box(0, 255, OBS_SHAPE, np.uint8)
+    if space.shape != stacked_space(frame, k, n_actions).shape:
+        raise ValueError(f'observations of shape {space.shape} are not {k}-frame stacks with '
                          f'{n_actions} action planes: a learner with memory acts on the '
                          'FrameStackEnv of its envs (nav_gym.training.memory)')
-    return spaces.Box(space.low[:channels], space.high[:channels], dtype=space.dtype)
 
 
 class FrameStackEnv(VecEnvWrapper):

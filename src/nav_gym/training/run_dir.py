@@ -29,6 +29,7 @@ from typing import Any
 
 from nav_gym.errors import TrainConfigError
 from nav_gym.training.config import TrainConfig, load_yaml
+from nav_gym.training.spec import LEGACY_DEFAULTS
 
 CONFIG = 'config.yaml'
 MONITOR = 'monitor.csv'
@@ -61,11 +62,6 @@ CLOSED_LOOP = 'eval_closed_loop'
 # RUN/report/
 REPORT = 'report'
 REPORT_TEXT = 'Result.md'
-#: settings whose default has changed: a run whose config does not name one (it was saved
-#: before the setting existed) trained with this value (SB3's DQN, one-step targets, no memory
-#: and no resets at SB3's replay ratio)
-LEGACY_DEFAULTS = {'double_q': False, 'n_steps': 1, 'frame_stack': 1, 'previous_action': False,
-                   'reset_interval': 0, 'gradient_steps': 1}
 #: the run settings evaluation must share with training (compared by the diagnosis)
 EVAL_SETTINGS = ('sim_params', 'forward_speed', 'turn_rate', 'turn_speed', 'max_episode_steps',
                  'progress_weight', 'step_penalty', 'goal_reward', 'collision_penalty')

@@ -27,6 +27,11 @@ COMPONENTS = {'n_steps': 1, 'dueling': False, 'augment_shift': 0, 'augment_colou
               'aux_depth': 0.0, 'munchausen': False, 'reset_interval': 0, 'recurrent': 0}
 #: the memory components (both on by default) turned off: the agent sees the latest frame alone
 WITHOUT_MEMORY = {name: COMPONENTS[name] for name in ('frame_stack', 'previous_action')}
+#: settings whose default has changed: a run whose config (or a checkpoint whose LearnerSpec)
+#: does not name one, saved before the setting existed, trained with this value (SB3's DQN,
+#: one-step targets, no memory and no resets at SB3's replay ratio)
+LEGACY_DEFAULTS = {'double_q': False, 'n_steps': 1, 'frame_stack': 1, 'previous_action': False,
+                   'reset_interval': 0, 'gradient_steps': 1}
 
 
 @dataclass(frozen=True)
@@ -109,6 +114,16 @@ class LearnerSpec:
     def memory(self) -> bool:
         """Tell whether the agent keeps a history (a frame stack or the previous action)."""
         return self.frame_stack > 1 or self.previous_action
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Unpickle a checkpoint's spec: a field it was saved without takes its value then.
+
+        Unpickling would otherwise read the class's default of today for it (a checkpoint from
+        before ``frame_stack`` would become a 4-frame learner).
+        """
+        then = {name: LEGACY_DEFAULTS.get(name, field.default)
+                for name, field in LEARNER_FIELDS.items()}
+        self.__dict__.update({**then, **state})
 
     @property
     def vanilla(self) -> bool:

@@ -108,7 +108,8 @@ def test_a_stop_answers_no_image_even_with_the_stale_image_stamp():
 def evaluated(tmp_path_factory, spaces_only) -> Path:
     """Evaluate a tiny run in lockstep and closed loop at 8x real time on two seeds.
 
-    Its learner has memory (a 2-frame stack), which both loops keep through the one actor.
+    Its learner has memory (a 2-frame stack and the previous action), which both loops keep
+    through the one actor.
     """
     run = make_tiny_run(tmp_path_factory.mktemp('run'), spaces_only, max_episode_steps=15,
                         frame_stack=2)

@@ -199,6 +199,11 @@ def test_checks_training_and_verbatim_sections(full_report: tuple[Path, str]) ->
     assert EXPERIMENTS.strip() in text
     reproduce = text.split('## 8. Reproduce')[1]
     assert 'nav-eval-evaluate runs/dqn_test\n' in reproduce  # no machine-specific path
+    # its config predates the learner's settings: they are given their values of that time,
+    # not today's defaults (a 4-frame stack...)
+    assert ('nav-gym-train --config runs/dqn_test/config.yaml --double-q false --n-steps 1 '
+            '--frame-stack 1 --previous-action false --reset-interval 0 --gradient-steps 1 '
+            '--run-name dqn_test_again') in reproduce
 
 
 def test_every_referenced_image_is_a_png(full_report: tuple[Path, str]) -> None:

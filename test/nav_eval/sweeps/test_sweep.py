@@ -21,7 +21,7 @@ import yaml
 from helpers import wait_until
 from nav_eval.sweeps.report import SECTIONS
 from nav_eval.sweeps.trial import train_args
-from nav_gym.training.run_dir import LEGACY_DEFAULTS
+from nav_gym.training.spec import LEGACY_DEFAULTS
 
 TINY = ['--total-timesteps', '200', '--set', 'learning_starts=100', '--set', 'checkpoint_freq=100',
         '--set', 'buffer_size=500', '--set', 'max_episode_steps=12', '--train-seeds', '101-102',

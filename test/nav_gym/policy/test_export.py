@@ -25,7 +25,7 @@ from nav_gym.policy.actors import DQNActor, load_policy
 from nav_gym.policy.config import PolicyConfig
 from nav_gym.policy.export import export_policy
 from nav_gym.policy.exported import META_FILE, ONNX_FILE, OnnxActor, read_export
-from nav_gym.training.spec import WITHOUT_MEMORY
+from nav_gym.training.spec import COMPONENTS, WITHOUT_MEMORY
 from nav_sim.core.config import HELDOUT, TRAIN, SimConfig
 from nav_sim.core.sim import NavSim
 from nav_sim.paths import executable_path
@@ -110,7 +110,7 @@ def test_onnx_q_values_equal_pytorchs_on_200_observations_from_both_banks(
 
 
 @pytest.mark.parametrize('flags', [
-    {'double_q': False, 'n_steps': 1}, {'dueling': True}, {'augment_shift': 4},
+    {'double_q': False, **COMPONENTS}, {'dueling': True}, {'augment_shift': 4},
     {'augment_colour': 0.2}, {'prioritized_replay': True, **WITHOUT_MEMORY}])
 def test_every_learner_flag_exports(tmp_path, spaces_only, flags):
     run = make_tiny_run(tmp_path, spaces_only, steps=16, **flags)

@@ -280,7 +280,7 @@ def test_a_memory_policy_begins_its_history_at_a_reset_event_the_service_and_a_s
     whose Q-values differ (checked first: the probe can see a history that goes on).  The
     same for its checkpoint and its ONNX export.
     """
-    run = make_tiny_run(tmp_path, spaces_only, frame_stack=2)
+    run = make_tiny_run(tmp_path, spaces_only, frame_stack=2, previous_action=False)
     if source == 'onnx':
         from nav_gym.policy.export import export_policy
         model = export_policy(run).path

@@ -81,7 +81,7 @@ def test_the_adopted_learner_is_the_default_and_sb3_dqn_is_one_file_away():
     assert vanilla.vanilla and learner_class(None, vanilla) is DQN  # SB3's own, untouched
     assert learner_kwargs(vanilla, 0.99) == {} and learner_policy(vanilla) == 'CnnPolicy'
     assert issubclass(learner_class(object(), LearnerSpec()), Learner)  # timed, too
-    assert not TrainConfig(double_q=False, n_steps=3).learner().vanilla
+    assert not TrainConfig(double_q=False, **{**COMPONENTS, 'n_steps': 3}).learner().vanilla
     assert 'double_q' not in TrainConfig().dqn_kwargs()  # not an SB3 argument
 
 
@@ -318,7 +318,7 @@ def test_an_episodes_first_frame_gets_the_depth_of_its_reset(spaces_only, memory
             obs, reward, _, truncated, info = super().step(action)
             return obs, reward, self.t % 7 == 0, truncated, info
 
-    spec = LearnerSpec(aux_depth=1.0, frame_stack=2 if memory else 1)
+    spec = LearnerSpec(aux_depth=1.0, frame_stack=2 if memory else 1, previous_action=False)
     envs = DummyVecEnv([Episodes, Episodes])
     model = learner_class(None, spec)(learner_policy(spec), FrameStackEnv(envs, 2) if memory
                                       else envs, buffer_size=200, learning_starts=100,
@@ -337,7 +337,7 @@ def test_the_depth_head_trains_and_never_changes_the_action(tmp_path, spaces_onl
     import copy
 
     from nav_gym.training.learner import q_and_features
-    spec = LearnerSpec(aux_depth=1.0, dueling=dueling)
+    spec = LearnerSpec(aux_depth=1.0, dueling=dueling, **WITHOUT_MEMORY)
     assert 'auxiliary depth loss of weight 1' in spec.describe() and not spec.vanilla
     model = learner_class(None, spec)(learner_policy(spec), _depth_env(spaces_only)(),
                                       buffer_size=200, learning_starts=40, batch_size=8,

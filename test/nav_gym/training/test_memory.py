@@ -194,6 +194,10 @@ def test_a_memory_learner_refuses_an_env_outside_the_agents_stacks(spaces_only):
                                          'planes: .* FrameStackEnv'):  # once a 0-channel buffer
         learner_class(None, spec)(learner_policy(spec), spaces_only(), buffer_size=16,
                                   device='cpu', **learner_kwargs(spec, 0.99))
+    three = LearnerSpec(frame_stack=3, previous_action=False)  # (3, 84, 84): 3 frames of 1?
+    with pytest.raises(ValueError, match='not 3-frame stacks with 0 action planes'):
+        learner_class(None, three)(learner_policy(three), spaces_only(), buffer_size=16,
+                                   device='cpu', **learner_kwargs(three, 0.99))
     stacked = FrameStackEnv(DummyVecEnv([spaces_only]), 4, previous_action=True)
     assert learner_class(None, spec)(learner_policy(spec), stacked, buffer_size=16,
                                      device='cpu', **learner_kwargs(spec, 0.99)
@@ -229,7 +233,7 @@ def test_an_actor_feeds_back_its_previous_action_begun_afresh_at_each_episode(sp
     assert [[int(t[0, 3 + a, 0, 0]) for a in range(3)] for t in seen[1:]] == [
         [255 * (a == action) for a in range(3)] for action in taken[:-1]]
     with pytest.raises(TrainConfigError, match='memory'):
-        TrainConfig(previous_action=True, prioritized_replay=True)
+        TrainConfig(frame_stack=1, previous_action=True, prioritized_replay=True)
 
 
 def test_a_resume_ends_the_running_episodes_for_n_step_returns_and_memory():

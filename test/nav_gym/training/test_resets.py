@@ -63,12 +63,12 @@ def test_resets_come_every_interval_once_learning_has_begun(spaces_only, monkeyp
     # at 50, 75, 100 and 125; not at 25 (still collecting), nor where fewer than 25 steps of
     # training would follow (150: the final model would be an untrained head)
     assert model.resets == len(calls) == 4
-    never = _model(spaces_only, LearnerSpec())
+    never = _model(spaces_only, LearnerSpec(reset_interval=0))
     never.learn(150)
     assert never.resets == 0 and len(calls) == 4
 
 
-def test_resets_keep_the_default_bit_for_bit_and_a_checkpoint_loads(spaces_only, tmp_path):
+def test_resets_not_due_keep_the_learner_bit_for_bit_and_a_checkpoint_loads(spaces_only, tmp_path):
     from nav_gym.training.learner import load_checkpoint
     runs = {}
     for spec in (LearnerSpec(reset_interval=0), LearnerSpec(reset_interval=1000)):  # none due

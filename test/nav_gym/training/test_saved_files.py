@@ -57,3 +57,20 @@ def test_a_checkpoint_and_replay_buffer_saved_before_the_move_resume():
     assert model.num_timesteps == 48 and buffer.size() == 48
     assert any(not (a == b.detach()).all() for a, b in zip(before, model.policy.parameters(),
                                                              strict=True))
+
+
+def test_a_checkpoint_from_before_the_memory_defaults_acts_on_one_frame():
+    from nav_gym.policy.actors import DQNActor
+    from nav_gym.training.spec import LEGACY_DEFAULTS
+
+    # its pickled spec names no frame_stack, previous_action or reset_interval: unpickled as
+    # today's defaults, the actor wanted a 4-frame stack with action planes of 3 channels
+    actor = DQNActor(DATA / 'dqn_32_steps.zip')
+    saved = actor.model.learner
+    assert (saved.frame_stack, saved.previous_action, saved.reset_interval) == (
+        LEGACY_DEFAULTS['frame_stack'], LEGACY_DEFAULTS['previous_action'],
+        LEGACY_DEFAULTS['reset_interval']) == (1, False, 0)
+    assert (saved.dueling, saved.prioritized_replay, saved.n_steps) == (True, True, 3)  # as saved
+    actor.begin_episode(1)
+    action, q_values = actor.act(np.zeros((3, 84, 84), np.uint8))
+    assert action in (0, 1, 2) and len(q_values) == 3
