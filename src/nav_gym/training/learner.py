@@ -7,9 +7,9 @@ online network pick the next action and the target network value it, instead of 
 maximum of the target network's values (which overestimates where the actions' true values are
 close: docs/experiments.md measured it here), on SB3's n-step replay buffer.  Each component
 has a published basis and a flag in config/train.yaml (:data:`nav_gym.training.spec.COMPONENTS`
-holds the value that turns it off);
-all of them off is the Double DQN learner, and ``double_q: false`` with all of them off is SB3's
-own ``DQN`` untouched (the workshop's learner, bit for bit: config/workshop.yaml).
+holds the value that turns it off); all of them off is the Double DQN learner, and
+``double_q: false`` with all of them off (and ``gradient_steps: 1``) is SB3's own ``DQN``
+untouched (the workshop's learner, bit for bit: config/workshop.yaml).
 
 - ``n_steps``: n-step returns (Sutton 1988; Rainbow, Hessel et al. 2018), SB3's own
   ``NStepReplayBuffer``;
