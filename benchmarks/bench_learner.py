@@ -109,14 +109,11 @@ def build(config: train_config.TrainConfig) -> Any:
 
     A learner with memory gets the agent's stacks (``FrameStackEnv``), as in training.
     """
-    learner = config.learner()
-    env: Any = SpacesOnly()
-    if learner.memory:
-        from stable_baselines3.common.vec_env import DummyVecEnv
+    from stable_baselines3.common.vec_env import DummyVecEnv
 
-        from nav_gym.training.memory import FrameStackEnv
-        env = FrameStackEnv(DummyVecEnv([SpacesOnly]), learner.frame_stack,
-                            learner.previous_action)
+    from nav_gym.training.memory import agent_envs
+    learner = config.learner()
+    env = agent_envs(DummyVecEnv([SpacesOnly]), learner)
     model = learner_class(None, learner)(
         learner_policy(learner), env,
         **{**config.dqn_kwargs(), 'buffer_size': 10_000, 'device': 'cpu'},

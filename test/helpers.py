@@ -76,9 +76,8 @@ def learner_env(spaces_only: type, learner):  # noqa: ANN001, ANN201
         return spaces_only()
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from nav_gym.training.memory import FrameStackEnv
-    return FrameStackEnv(DummyVecEnv([spaces_only]), learner.frame_stack,
-                         learner.previous_action)  # on the agent's side, as training has it
+    from nav_gym.training.memory import agent_envs
+    return agent_envs(DummyVecEnv([spaces_only]), learner)  # as training has it
 
 
 def make_tiny_run(path, spaces_only: type, steps: int = 32, **settings: object):  # noqa: ANN201

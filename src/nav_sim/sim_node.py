@@ -14,39 +14,49 @@ from nav_sim.errors import ConfigError, ScenarioError, WorldError, WorldNotFound
 from nav_sim.ros.lockstep import spin_lockstep
 from nav_sim.ros.node import SimNode
 from nav_sim.ros.process import ERROR_PREFIX
+from nav_sim.ros.stop_request import StopRequest, stop_on_signals
 
 
 def main(args: list[str] | None = None) -> None:
-    """Entry point of ``ros2 run nav_sim sim_node`` and the ``nav-sim`` console script."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        # the executor exists before the node is discoverable: a SIGTERM from a client that
-        # has just seen the node must not land in the executor's constructor
-        executor = SingleThreadedExecutor()
-        node = SimNode()
-        executor.add_node(node)
-        if node.settings.mode == 'lockstep':
-            spin_lockstep(node, executor, node.sub_cmd)  # blocks while idle
-        else:
-            executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except ConfigError as exc:
-        print(f'{ERROR_PREFIX}invalid configuration: {exc}')
-        raise SystemExit(2) from None
-    except (WorldError, WorldNotFoundError, ScenarioError) as exc:  # one line per problem
-        for line in str(exc).splitlines():
-            print(f'{ERROR_PREFIX}invalid world: {line}')
-        raise SystemExit(2) from None
-    except Exception:
-        if rclpy.ok():
-            raise
-        # SIGINT/SIGTERM arrived while the node was starting: a clean exit, no traceback
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    """Entry point of ``ros2 run nav_sim sim_node`` and the ``nav-sim`` console script.
+
+    SIGINT and SIGTERM raise nothing here.  Python's handler only notes them
+    (:class:`StopRequest`).  rclpy's handlers, installed after it and chaining to it, shut the
+    context down, which ends the spinning.  A KeyboardInterrupt raised mid-way through the
+    node's construction could leave Python's exit code at -2 even when caught.
+    """
+    with stop_on_signals(StopRequest()) as stop:
+        rclpy.init(args=args)
+        node = None
+        try:
+            # the executor exists before the node is discoverable: a SIGTERM from a client that
+            # has just seen the node must not land in the executor's constructor
+            executor = SingleThreadedExecutor()
+            node = SimNode()
+            executor.add_node(node)
+            if stop:  # a signal that came before rclpy's handlers: nothing will shut it down
+                return
+            if node.settings.mode == 'lockstep':
+                spin_lockstep(node, executor, node.sub_cmd)  # blocks while idle
+            else:
+                executor.spin()
+        except ExternalShutdownException:
+            pass
+        except ConfigError as exc:
+            print(f'{ERROR_PREFIX}invalid configuration: {exc}')
+            raise SystemExit(2) from None
+        except (WorldError, WorldNotFoundError, ScenarioError) as exc:  # one line per problem
+            for line in str(exc).splitlines():
+                print(f'{ERROR_PREFIX}invalid world: {line}')
+            raise SystemExit(2) from None
+        except Exception:
+            if rclpy.ok():
+                raise
+            # SIGINT/SIGTERM arrived while the node was starting: a clean exit, no traceback
+        finally:
+            if node is not None:
+                node.destroy_node()
+            rclpy.try_shutdown()
 
 
 if __name__ == '__main__':

@@ -16,7 +16,7 @@ last ``k`` frames (:class:`nav_gym.policy.history.FrameHistory`, the one stack r
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from gymnasium import spaces
@@ -25,6 +25,9 @@ from stable_baselines3.common.vec_env import VecEnv, VecEnvWrapper
 
 from nav_gym.env.observation import OBS_SHAPE
 from nav_gym.policy.history import NO_ACTION, FrameHistory, action_planes, history_positions
+
+if TYPE_CHECKING:
+    from nav_gym.training.spec import LearnerSpec
 
 
 def stacked_space(space: spaces.Box, k: int, n_actions: int = 0) -> spaces.Box:
@@ -100,6 +103,16 @@ class FrameStackEnv(VecEnvWrapper):
             else:
                 out.append(history.push(frame, action))
         return np.stack(out), rewards, dones, infos
+
+
+def agent_envs(venv: VecEnv, learner: LearnerSpec) -> VecEnv:
+    """Return ``venv`` as ``learner`` acts on it: in its :class:`FrameStackEnv` with memory.
+
+    The one place where training, the benchmarks and the tests give a learner its envs.
+    """
+    if not learner.memory:
+        return venv
+    return FrameStackEnv(venv, learner.frame_stack, learner.previous_action)
 
 
 class FrameStore:

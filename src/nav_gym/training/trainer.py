@@ -66,12 +66,12 @@ def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> Any:
     """Return the run's ``n_envs`` envs: ``ParallelEnvs`` of ``Monitor(NavigationEnv)``.
 
     With memory (``frame_stack`` > 1, ``previous_action``) they are wrapped in the agent's
-    ``FrameStackEnv``.
+    ``FrameStackEnv`` (:func:`nav_gym.training.memory.agent_envs`).
 
     Their episodes all go to the run's one monitor.csv (a resumed run appends to it).
     """
     # torch (SB3's VecEnv): after quiet_learner_threads()
-    from nav_gym.training.memory import FrameStackEnv
+    from nav_gym.training.memory import agent_envs
     from nav_gym.training.parallel import SETTLE_SECONDS, MonitorFile, ParallelEnvs
     monitor_file = run_dir / MONITOR
     writer = MonitorFile(str(monitor_file), resume and monitor_file.exists(),
@@ -84,10 +84,7 @@ def build_env(config: TrainConfig, run_dir: Path, resume: bool) -> Any:
     except BaseException:
         writer.close()
         raise
-    # the agent's memory (frame_stack > 1, previous_action): its stacks, on its side of the envs
-    learner = config.learner()
-    return (FrameStackEnv(envs, learner.frame_stack, learner.previous_action) if learner.memory
-            else envs)
+    return agent_envs(envs, config.learner())  # the agent's memory, on its side of the envs
 
 
 def _monitored_env(writer: Any, env_config: Any) -> Any:
