@@ -70,7 +70,9 @@ from nav_gym.training.aux_depth import (
 from nav_gym.training.memory import FrameStackReplayBuffer, refuse_unstacked
 from nav_gym.training.recurrent import recurrent_policy_kwargs
 from nav_gym.training.replay import (  # SumTree: buffers pickled before name it here
+    DepthPrioritizedFrameStackReplayBuffer,
     DepthPrioritizedReplayBuffer,
+    PrioritizedFrameStackReplayBuffer,
     PrioritizedReplayBuffer,
     SumTree,  # noqa: F401
 )
@@ -251,6 +253,13 @@ class Learner(DQN):
             self.logger.record('train/depth_loss', np.mean(depth_losses))
 
 
+# the replay buffer of a learner with memory, by (aux_depth, prioritized_replay)
+BUFFERS = {(False, False): FrameStackReplayBuffer,
+           (True, False): DepthFrameStackReplayBuffer,
+           (False, True): PrioritizedFrameStackReplayBuffer,
+           (True, True): DepthPrioritizedFrameStackReplayBuffer}
+
+
 def learner_kwargs(spec: LearnerSpec, gamma: float) -> dict[str, Any]:
     """Return what ``DQN(...)`` needs for this learner beyond the hyperparameters.
 
@@ -263,11 +272,13 @@ def learner_kwargs(spec: LearnerSpec, gamma: float) -> dict[str, Any]:
                               'learner': spec}
     depth = bool(spec.aux_depth)
     if spec.memory:  # single frames in the buffer, stacks rebuilt at sample time
-        kwargs['replay_buffer_class'] = (DepthFrameStackReplayBuffer if depth
-                                         else FrameStackReplayBuffer)
+        kwargs['replay_buffer_class'] = BUFFERS[depth, spec.prioritized_replay]
         kwargs['replay_buffer_kwargs'] = {'frame_stack': spec.frame_stack,
                                           'previous_action': spec.previous_action,
                                           'n_steps': spec.n_steps, 'gamma': gamma}
+        if spec.prioritized_replay:
+            kwargs['replay_buffer_kwargs'].update(alpha=spec.priority_alpha,
+                                                  beta=spec.priority_beta)
         if spec.recurrent:  # the window read by an LSTM, not stacked into the first conv
             kwargs['policy_kwargs'].update(recurrent_policy_kwargs(
                 spec.frame_stack, spec.recurrent, spec.previous_action))

@@ -1,7 +1,9 @@
 """Proportional prioritized replay (``prioritized_replay``) over SB3's n-step replay buffer.
 
-Its own module for the learner's size; checkpoints and buffers pickled before name its classes
-in :mod:`nav_gym.training.learner`, which imports them, so they load as before.
+With memory, over the frame-stack buffer (:class:`PrioritizedFrameStackReplayBuffer`): the
+priorities are the transitions', the stacks rebuilt as that buffer does.  Its own module for the
+learner's size; checkpoints and buffers pickled before name its classes in
+:mod:`nav_gym.training.learner`, which imports them, so they load as before.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from stable_baselines3.common.buffers import NStepReplayBuffer
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
 from nav_gym.training.aux_depth import DepthTargets
+from nav_gym.training.memory import FrameStackReplayBuffer
 
 PRIORITY_EPS = 1e-6  # added to |TD error| so that no transition's priority is zero
 
@@ -107,3 +110,11 @@ class PrioritizedReplayBuffer(NStepReplayBuffer):
 
 class DepthPrioritizedReplayBuffer(DepthTargets, PrioritizedReplayBuffer):
     """Prioritized replay with depth targets."""
+
+
+class PrioritizedFrameStackReplayBuffer(PrioritizedReplayBuffer, FrameStackReplayBuffer):
+    """Prioritized replay of the agent's stacks: single frames stored, stacks sampled."""
+
+
+class DepthPrioritizedFrameStackReplayBuffer(DepthTargets, PrioritizedFrameStackReplayBuffer):
+    """Prioritized replay of the agent's stacks with depth targets."""

@@ -105,10 +105,6 @@ class LearnerSpec:
         if self.recurrent and self.frame_stack < 2:
             raise TrainConfigError('recurrent reads the frame_stack window: set frame_stack to '
                                    '2 or more')
-        if self.memory and self.prioritized_replay:
-            raise TrainConfigError('prioritized_replay does not combine with memory yet '
-                                   '(frame_stack > 1, previous_action: the default has both): '
-                                   'set frame_stack: 1 and previous_action: false with it')
 
     @property
     def memory(self) -> bool:

@@ -207,8 +207,10 @@ def test_priorities_follow_td_errors_and_weights_correct_the_sampling():
                                   LearnerSpec(dueling=True, prioritized_replay=True,
                                               **WITHOUT_MEMORY),
                                   LearnerSpec(double_q=False, munchausen=True),
-                                  LearnerSpec(augment_colour=0.2)],
-                         ids=['default', 'shift+nstep', 'dueling+per', 'munchausen', 'colour'])
+                                  LearnerSpec(augment_colour=0.2),
+                                  LearnerSpec(prioritized_replay=True)],
+                         ids=['default', 'shift+nstep', 'dueling+per', 'munchausen', 'colour',
+                              'per+memory'])
 def test_a_checkpoint_of_the_learner_loads_with_dqn_load(tmp_path, spaces_only, spec):
     env = learner_env(spaces_only, spec)
     model = learner_class(None, spec)(learner_policy(spec), env, buffer_size=200,
@@ -245,13 +247,19 @@ def test_a_run_and_its_resume_end_at_their_budget_not_at_a_whole_rollout(spaces_
 # --- the auxiliary depth loss (issue 30): targets beside the observations, never in them --------
 def _depth_buffers():
     from nav_gym.training.aux_depth import DepthFrameStackReplayBuffer, DepthReplayBuffer
-    from nav_gym.training.learner import DepthPrioritizedReplayBuffer
+    from nav_gym.training.learner import (
+        DepthPrioritizedFrameStackReplayBuffer,
+        DepthPrioritizedReplayBuffer,
+    )
     one = spaces.Box(-1e6, 1e6, (1,), np.float32)
     return {
         'n-step, 2 envs': (DepthReplayBuffer, one, 2, {}),
         'prioritized': (DepthPrioritizedReplayBuffer, one, 1, {}),
         'frame stack, 2 envs': (DepthFrameStackReplayBuffer,
                                 spaces.Box(-1e6, 1e6, (2,), np.float32), 2, {'frame_stack': 2}),
+        'prioritized frame stack': (DepthPrioritizedFrameStackReplayBuffer,
+                                    spaces.Box(-1e6, 1e6, (2,), np.float32), 1,
+                                    {'frame_stack': 2}),
     }
 
 

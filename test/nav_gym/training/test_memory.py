@@ -204,11 +204,38 @@ def test_a_memory_learner_refuses_an_env_outside_the_agents_stacks(spaces_only):
                                      ).observation_space.shape == (15, 84, 84)
 
 
+def test_prioritized_replay_samples_the_stacks_of_the_transitions_it_weighs():
+    from nav_gym.training.replay import PrioritizedFrameStackReplayBuffer
+
+    k, size = 3, 30
+    envs = FrameStackEnv(DummyVecEnv([lambda: Counter(5)]), k, previous_action=True)
+    buffer = PrioritizedFrameStackReplayBuffer(size, envs.observation_space, envs.action_space,
+                                               device='cpu', frame_stack=k, n_steps=1,
+                                               previous_action=True, alpha=1.0, beta=1.0)
+    assert buffer.observations.frames.shape == (size, 1, 3, 4, 4)  # single frames
+    added = {}
+    obs = envs.reset()
+    for step in range(20):
+        action = np.array([step % 3])
+        nxt, rewards, dones, infos = envs.step(action)
+        real_next = np.array([infos[0]['terminal_observation'] if dones[0] else nxt[0]])
+        added[buffer.pos] = (obs[0].copy(), real_next[0].copy())
+        buffer.add(obs, real_next, action, rewards, dones, infos)
+        obs = nxt
+    buffer.update_priorities(np.arange(20), np.r_[np.full(19, 1e-3), 10.0])  # the newest
+    np.random.seed(0)
+    samples = buffer.sample(16)
+    assert np.mean(buffer.last_indices == 19) > 0.9  # drawn by its priority
+    for i, position in enumerate(buffer.last_indices):  # each sample: its transition's stacks
+        stacked, stacked_next = added[int(position)]
+        assert np.array_equal(samples.observations[i].numpy(), stacked)
+        assert np.array_equal(samples.next_observations[i].numpy(), stacked_next)
+    assert buffer.last_weights.max() == 1.0 and buffer.last_weights.min() > 0
+
+
 @pytest.mark.filterwarnings('ignore:`n_steps=3` is ignored')
 def test_an_actor_feeds_back_its_previous_action_begun_afresh_at_each_episode(spaces_only,
                                                                                tmp_path):
-    from nav_gym.errors import TrainConfigError
-    from nav_gym.training.config import TrainConfig
     from nav_gym.training.spec import LearnerSpec
 
     spec = LearnerSpec(frame_stack=1, previous_action=True)  # memory of what it did, one frame
@@ -232,8 +259,6 @@ def test_an_actor_feeds_back_its_previous_action_begun_afresh_at_each_episode(sp
     assert taken != greedy  # the probe: some random action replaced the greedy one
     assert [[int(t[0, 3 + a, 0, 0]) for a in range(3)] for t in seen[1:]] == [
         [255 * (a == action) for a in range(3)] for action in taken[:-1]]
-    with pytest.raises(TrainConfigError, match='memory'):
-        TrainConfig(frame_stack=1, previous_action=True, prioritized_replay=True)
 
 
 def test_a_resume_ends_the_running_episodes_for_n_step_returns_and_memory():
