@@ -1,7 +1,8 @@
 """The learner's cost: the default (or a given) learner against SB3's vanilla DQN, side by side.
 
-    .venv/bin/python benchmarks/bench_learner.py [--set KEY=V ...] [--gradient-steps 200]
-        [--rounds 5] [--train-steps 6000] [--train-repeats 1] [--threads N]
+    .venv/bin/python benchmarks/bench_learner.py [--set KEY=V ...] [--against KEY=V ...]
+        [--gradient-steps 200] [--rounds 5] [--train-steps 6000] [--train-repeats 1]
+        [--threads N]
 
 0. **The floor**: the plain PyTorch gradient step of the same computation, in the same run:
    SB3's NatureCNN and head (online and target), a batch sampled from a 50,000-transition uint8
@@ -24,7 +25,9 @@
    the final learner trains 50k steps no slower than vanilla DQN).
 
 ``--set KEY=V`` chooses the learner against vanilla DQN (e.g. ``--set augment_shift=4``); the
-default is today's default learner.  ``--threads`` is torch's thread count (default: what
+default is today's default learner.  ``--against KEY=V`` sets learner A on top of
+config/workshop.yaml's settings instead (``--against double_q=true --against n_steps=3``: the
+default before issue 30's memory).  ``--threads`` is torch's thread count (default: what
 training uses, all cores).
 """
 
@@ -308,10 +311,13 @@ def trainings(settings: dict[str, list[str]], steps: int, repeats: int) -> None:
 
 
 def main() -> None:
-    """Measure vanilla DQN and the chosen learner side by side."""
+    """Measure vanilla DQN (or the learner ``--against`` names) and the chosen one side by side."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--set', action='append', default=[], metavar='KEY=V',
                         help='a learner setting of the compared learner (nav-gym-train --help)')
+    parser.add_argument('--against', action='append', default=[], metavar='KEY=V',
+                        help="a learner setting of A on top of config/workshop.yaml's (e.g. "
+                             'double_q=true and n_steps=3: the default before issue 30)')
     parser.add_argument('--gradient-steps', type=int, default=200)
     parser.add_argument('--rounds', type=int, default=5)
     parser.add_argument('--train-steps', type=int, default=6000, help='0: skip part 2')
@@ -324,13 +330,13 @@ def main() -> None:
     learner_keys = {f.name for f in dataclasses.fields(LearnerSpec)} | set(workshop)
     common = [s for s in args.set if s.split('=')[0] not in learner_keys]  # both learners'
     vanilla = [f'{k}={str(v).lower()}' for k, v in workshop.items()]
-    flags = {'vanilla DQN (SB3)': [*common, *vanilla], 'chosen': args.set}
+    flags = {'A': [*common, *vanilla, *args.against], 'B': args.set}
     configs = {name: train_config.build(None, dict(s.split('=', 1) for s in settings))
                for name, settings in flags.items()}
-    assert configs['vanilla DQN (SB3)'].learner().vanilla
-    print(f"A: vanilla DQN (SB3)\nB: {configs['chosen'].learner().describe()}")
-    configs = {'A': configs['vanilla DQN (SB3)'], 'B': configs['chosen']}
-    flags = {'A': flags['vanilla DQN (SB3)'], 'B': flags['chosen']}
+    baseline = configs['A'].learner()
+    assert args.against or baseline.vanilla
+    print(f"A: {baseline.describe() if args.against else 'vanilla DQN (SB3)'}\n"
+          f"B: {configs['B'].learner().describe()}")
     gradient_steps(configs, args.gradient_steps, args.rounds)
     if args.train_steps:
         trainings(flags, args.train_steps, args.train_repeats)

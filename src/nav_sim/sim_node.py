@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.signals import uninstall_signal_handlers
 
 from nav_sim.errors import ConfigError, ScenarioError, WorldError, WorldNotFoundError
 from nav_sim.ros.lockstep import spin_lockstep
@@ -17,13 +18,17 @@ from nav_sim.ros.process import ERROR_PREFIX
 from nav_sim.ros.stop_request import StopRequest, stop_on_signals
 
 
+STOP_POLL_S = 0.5  # realtime: the longest wait between looks at the stop flag
+
+
 def main(args: list[str] | None = None) -> None:
     """Entry point of ``ros2 run nav_sim sim_node`` and the ``nav-sim`` console script.
 
     SIGINT and SIGTERM raise nothing here.  Python's handler only notes them
-    (:class:`StopRequest`).  rclpy's handlers, installed after it and chaining to it, shut the
-    context down, which ends the spinning.  A KeyboardInterrupt raised mid-way through the
-    node's construction could leave Python's exit code at -2 even when caught.
+    (:class:`StopRequest`), and the spinning ends on the flag.  rclpy's handlers, installed
+    after it and chained to it, wake the spinning and shut the context down.  A
+    KeyboardInterrupt raised while the node was being built could leave the exit code at -2,
+    even when caught.
     """
     with stop_on_signals(StopRequest()) as stop:
         rclpy.init(args=args)
@@ -34,12 +39,11 @@ def main(args: list[str] | None = None) -> None:
             executor = SingleThreadedExecutor()
             node = SimNode()
             executor.add_node(node)
-            if stop:  # a signal that came before rclpy's handlers: nothing will shut it down
-                return
             if node.settings.mode == 'lockstep':
-                spin_lockstep(node, executor, node.sub_cmd)  # blocks while idle
+                spin_lockstep(node, executor, node.sub_cmd, stop=stop)  # blocks while idle
             else:
-                executor.spin()
+                while node.context.ok() and not stop:
+                    executor.spin_once(timeout_sec=STOP_POLL_S)
         except ExternalShutdownException:
             pass
         except ConfigError as exc:
@@ -57,6 +61,7 @@ def main(args: list[str] | None = None) -> None:
             if node is not None:
                 node.destroy_node()
             rclpy.try_shutdown()
+            uninstall_signal_handlers()  # before Python's own come back, outside the block
 
 
 if __name__ == '__main__':

@@ -19,6 +19,8 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerGuardCondition
 from rclpy.subscription import Subscription
 
+from nav_sim.ros.stop_request import StopRequest
+
 
 class NodeWaitSet:
     """Every entity of one node (and some extra guard conditions) in a bare rcl wait set.
@@ -91,12 +93,14 @@ class NodeWaitSet:
 
 
 def spin_lockstep(node: Node, executor: Executor, subscription: Subscription,
-                  callback: Callable[[Any], None] | None = None) -> None:
+                  callback: Callable[[Any], None] | None = None,
+                  stop: StopRequest | None = None) -> None:
     """Serve ``subscription`` directly and hand everything else of ``node`` to ``executor``.
 
-    Returns when the node's context shuts down (Ctrl-C, SIGTERM, ``rclpy.shutdown``).  rclpy's
-    SIGINT guard condition and one that shutdown triggers are in the wait set, so neither waits
-    for the next command.
+    Returns when the node's context shuts down (``rclpy.shutdown``) or ``stop`` is set (Ctrl-C,
+    SIGTERM).  rclpy's SIGINT guard condition and one that shutdown triggers are in the wait set,
+    so neither waits for the next command.  rclpy's handler wakes the wait before its thread
+    shuts the context down, so the stop flag ends the loop, not the context alone.
     """
     context = node.context
     handle = callback or subscription.callback
@@ -105,7 +109,7 @@ def spin_lockstep(node: Node, executor: Executor, subscription: Subscription,
     context.on_shutdown(wake.trigger)
     waits = NodeWaitSet(node, (wake, sigint))
     try:
-        while context.ok():
+        while context.ok() and not stop:
             mine, other = waits.wait(subscription)
             if mine:  # rclpy's own handlers take Ctrl-C here: no KeyboardInterrupt (bare.take)
                 taken = subscription.handle.take_message(subscription.msg_type,

@@ -204,6 +204,31 @@ print('main returned')
 """
 
 
+BEFORE_INIT = """
+import os, signal, sys
+import nav_sim.sim_node as sim_node
+
+init = sim_node.rclpy.init
+
+def interrupted_init(*args, **kwargs):
+    os.kill(os.getpid(), signal.SIGINT)  # before rclpy's handlers: only the flag knows of it
+    init(*args, **kwargs)
+
+sim_node.rclpy.init = interrupted_init
+sim_node.main(sys.argv[1:])
+print('main returned')
+"""
+
+
+@pytest.mark.parametrize('mode', ['lockstep', 'realtime'])
+def test_a_sigint_before_rclpys_handlers_still_stops_the_sim(namespace, mode):
+    # rclpy never hears of it, so its context stays up: the spinning must end on the flag
+    done = subprocess.run([sys.executable, '-c', BEFORE_INIT, *ros_args(namespace,
+                                                                        {'mode': mode})],
+                          capture_output=True, text=True, timeout=60)
+    assert done.returncode == 0 and 'main returned' in done.stdout, done.stdout + done.stderr
+
+
 def test_a_sigint_while_the_node_is_built_raises_nothing_and_exits_0(namespace):
     # a KeyboardInterrupt raised while the node was being built, even when caught, at times
     # ended the process with -2 and no traceback (CPython keeps a flag for an interrupt raised
