@@ -17,7 +17,6 @@ from nav_sim.ros.node import SimNode
 from nav_sim.ros.process import ERROR_PREFIX
 from nav_sim.ros.stop_request import StopRequest, stop_on_signals
 
-
 STOP_POLL_S = 0.5  # realtime: the longest wait between looks at the stop flag
 
 
