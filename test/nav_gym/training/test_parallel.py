@@ -178,7 +178,7 @@ def test_n_envs_keep_the_replay_ratio(train_freq, gradient_steps, n_envs):
 
 def test_n_envs_settings_refused_in_one_line_and_namespaces():
     with pytest.raises(TrainConfigError, match='prioritized_replay supports n_envs 1'):
-        TrainConfig(n_envs=2, prioritized_replay=True, frame_stack=1, previous_action=False)
+        TrainConfig(n_envs=2, prioritized_replay=True)
     with pytest.raises(TrainConfigError, match="sim must be 'auto' or 'embedded'"):
         TrainConfig(n_envs=2, sim='attach')
     configs = TrainConfig(n_envs=3, namespace='/lab').env_configs()

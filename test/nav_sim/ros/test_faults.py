@@ -234,8 +234,8 @@ def test_a_sigint_while_the_node_is_built_raises_nothing_and_exits_0(namespace):
     # ended the process with -2 and no traceback (CPython keeps a flag for an interrupt raised
     # in code it ran through PyRun_*); the sim's handler now only notes the signal, and
     # rclpy's, chained to it, shut the context down
-    done = subprocess.run([sys.executable, '-c', STARTING, '--ros-args', '-r',
-                           f'__ns:={namespace}'], capture_output=True, text=True, timeout=60)
+    done = subprocess.run([sys.executable, '-c', STARTING, *ros_args(namespace, {})],
+                          capture_output=True, text=True, timeout=60)
     output = done.stdout + done.stderr
     assert done.returncode == 0 and 'main returned' in done.stdout, output
     assert 'KeyboardInterrupt' not in output
