@@ -4,6 +4,7 @@
                             [--total-timesteps N] [--cpus-per-trial C] [--gpus-per-trial 0]
                             [--address auto|HOST:PORT] [--storage DIR] [--name NAME]
     ros2 run nav_eval sweep --resume SWEEP_DIR      # continue an interrupted sweep
+    ros2 run nav_eval sweep ... --summary DEST      # keep the summary form in DEST, per trial
     ros2 run nav_eval sweep --aggregate DIR         # statistics of finished trials only
     ros2 run nav_eval sweep --export SWEEP_DIR DEST # copy the summary form (for docs/sweeps)
 
@@ -21,7 +22,7 @@ from pathlib import Path
 from nav_eval.seeds import CURVE, HELDOUT_BANK, TRAIN_BANK, add_many_episodes_argument, seed_text
 from nav_eval.sweeps.cluster import check_cluster
 from nav_eval.sweeps.runner import aggregate, export, run_sweep
-from nav_eval.sweeps.spec import load_spec, spec_from_args
+from nav_eval.sweeps.spec import load_spec, save_spec, spec_from_args, summary_folder
 from nav_gym.cli import run_command, strip_ros_args
 
 
@@ -65,6 +66,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--storage', default='runs', help='directory of the sweep directory '
                         '(on a cluster: a path every node shares)')
     parser.add_argument('--name', help='sweep directory name (default sweep_<date>_<time>)')
+    parser.add_argument('--summary', type=Path, metavar='DEST',
+                        help="keep the sweep's summary form (what --export writes) in DEST, "
+                        'rewritten after each finished trial, e.g. docs/sweeps/NAME: what has '
+                        'finished outlives a checkout that does not keep runs/ (with --resume: '
+                        'from now on)')
     parser.add_argument('--retry-failed', action='store_true',
                         help='with --resume: run failed trials again')
     return parser
@@ -88,6 +94,9 @@ def main(argv: list[str] | None = None) -> None:
                 spec.cpus_per_trial = args.cpus_per_trial
             if args.gpus_per_trial != 0:
                 spec.gpus_per_trial = args.gpus_per_trial
+            if args.summary is not None:  # kept in sweep.json for the next --resume
+                spec.summary = summary_folder(args.summary, args.resume)
+                save_spec(spec)
             return run_sweep(spec, args.address, resume=True, retry_failed=args.retry_failed)
         return run_sweep(spec_from_args(args), args.address, resume=False)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from functools import partial
 from pathlib import Path
 
 from nav_eval.errors import SweepError
@@ -34,7 +35,9 @@ def run_sweep(spec: SweepSpec, address: str | None, resume: bool,
     done = {t['name'] for t in trials if trial_finished(t)}
     if resume and not retry_failed:  # failed for good in an earlier session: not run again
         done |= set(_read_failures(failures))
-    outcome = run_trials(spec, trials, address, resume, retry_failed, done)
+    keep = partial(keep_summary, Path(spec.sweep_dir), Path(spec.summary)) if spec.summary \
+        else None
+    outcome = run_trials(spec, trials, address, resume, retry_failed, done, after_each=keep)
     if outcome.failed:
         failures.write_text(json.dumps(outcome.failed, indent=1, sort_keys=True) + '\n')
     else:
@@ -46,7 +49,7 @@ def run_sweep(spec: SweepSpec, address: str | None, resume: bool,
         print(f'sweep interrupted: {len(outcome.finished)} of {len(trials)} trials finished; '
               f'continue with: visnav-sweep --resume {spec.sweep_dir}', flush=True)
         return INTERRUPTED
-    aggregate(Path(spec.sweep_dir))
+    (keep or partial(aggregate, Path(spec.sweep_dir)))()
     return 1 if outcome.failed else 0
 
 
@@ -87,6 +90,26 @@ def export(sweep_dir: Path, destination: Path) -> Path:
             shutil.copytree(source, destination / name)
         elif source.is_file():
             shutil.copy2(source, destination / name)
+    return destination
+
+
+def keep_summary(sweep_dir: Path, destination: Path) -> Path:
+    """Aggregate the sweep's finished trials and replace ``destination`` with its summary form.
+
+    ``--summary DEST``: the sweep calls it after each trial that completes, so that what has
+    finished outlives a checkout that does not keep ``runs/``.  The new summary is written
+    beside ``destination`` and swapped in, so a stop at any moment leaves a whole one.
+    """
+    aggregate(sweep_dir)
+    fresh, old = (destination.with_name(f'.{destination.name}.{s}') for s in ('new', 'old'))
+    for leftover in (fresh, old):
+        shutil.rmtree(leftover, ignore_errors=True)
+    export(sweep_dir, fresh)
+    if destination.exists():
+        destination.rename(old)
+    fresh.rename(destination)
+    shutil.rmtree(old, ignore_errors=True)
+    print(f'sweep summary: {destination}', flush=True)
     return destination
 
 

@@ -68,6 +68,7 @@ class SweepSpec:
     cpus_per_trial: float = 2
     gpus_per_trial: float = 0
     naming: int = 1  # NAMING of the code that created the sweep (older sweeps: 1)
+    summary: str = ''  # --summary: a folder the sweep keeps its summary form in ('' = none)
 
     def configurations(self) -> list[tuple[str, dict[str, str]]]:
         """Return (config name, overrides) for every grid point, in grid order.
@@ -197,6 +198,42 @@ def load_spec(sweep_dir: Path) -> SweepSpec:
     return SweepSpec(**data)
 
 
+def summary_folder(path: Path | None, sweep_dir: Path | None = None) -> str:
+    """Return ``--summary``'s folder as sweep.json keeps it ('' for none), or raise SweepError.
+
+    The sweep replaces the folder after each finished trial, so it must be new (or empty), or,
+    for a resumed sweep (``sweep_dir``), this sweep's own summary: its sweep.json the same.
+    """
+    if path is None:
+        return ''
+    if path.exists():
+        mine = _settings(sweep_dir) if sweep_dir is not None else None
+        own = mine is not None and _settings(path) == mine
+        if not (own or (path.is_dir() and not any(path.iterdir()))):
+            raise SweepError(f"--summary {path} exists and is not this sweep's summary: name a "
+                             'new folder (the sweep replaces it after each finished trial)')
+    return str(path.resolve())
+
+
+def _settings(folder: Path) -> dict[str, Any] | None:
+    """Return a sweep's or a summary's sweep.json without where it keeps its summary."""
+    try:
+        data = json.loads((folder / SWEEP_FILE).read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(data, dict):
+        return None
+    data.pop('summary', None)
+    return data
+
+
+def save_spec(spec: SweepSpec) -> None:
+    """Write ``sweep.json`` (all but the sweep's own directory, which is where it lies)."""
+    data = dataclasses.asdict(spec)
+    data.pop('sweep_dir')
+    (Path(spec.sweep_dir) / SWEEP_FILE).write_text(json.dumps(data, indent=1) + '\n')
+
+
 def trial_cpus(fixed: dict[str, str], grid: dict[str, list[str]]) -> float:
     """Return the CPUs a trial gets unless ``--cpus-per-trial`` says.
 
@@ -247,15 +284,14 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     cpus = args.cpus_per_trial if args.cpus_per_trial is not None else trial_cpus(fixed, grid)
     if cpus < 1 or args.gpus_per_trial < 0:
         raise SweepError('--cpus-per-trial must be >= 1 and --gpus-per-trial >= 0')
+    summary = summary_folder(args.summary)
     spec = SweepSpec(str(sweep_dir), seeds['seeds'], grid, fixed, seeds['train_seeds'],
                      seeds['heldout_seeds'], curve, not args.no_baselines, args.record,
-                     cpus, args.gpus_per_trial, NAMING)
+                     cpus, args.gpus_per_trial, NAMING, summary)
     for trial in spec.trials():  # each becomes a run name (long --set values can exceed it)
         problem = plain_name_problem('a trial name', trial['name'])
         if problem:
             raise SweepError(f'{problem}: shorten the --set or --grid values')
     write_configs(spec)  # creates the sweep directory once every grid point is valid
-    data = dataclasses.asdict(spec)
-    data.pop('sweep_dir')
-    (sweep_dir / SWEEP_FILE).write_text(json.dumps(data, indent=1) + '\n')
+    save_spec(spec)
     return spec

@@ -13,7 +13,7 @@ import logging
 import os
 import time
 from collections import Counter
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -163,6 +163,25 @@ class ProgressLines(tune.Callback):
                    f'done, ETA {eta}')
 
 
+class AfterEachTrial(tune.Callback):
+    """Call ``action()`` after each trial that completes (the sweep's summary keeper).
+
+    It runs in the driver, between Tune's steps, while the other trials go on.  An error in it
+    is printed in one line and the sweep goes on: a summary is a copy, never a reason to stop.
+    """
+
+    def __init__(self, action: Callable[[], Any]) -> None:
+        """Call ``action`` once per completed trial."""
+        self.action = action
+
+    def on_trial_complete(self, iteration: int, trials: list, trial: Any, **info: Any) -> None:
+        """Run the action; print its error, if any, instead of raising it."""
+        try:
+            self.action()
+        except Exception as exc:  # any failure of a copy must not stop the sweep
+            print(f'after {_name(trial)}: {type(exc).__name__}: {exc}', flush=True)
+
+
 def eta_text(durations: Mapping[str, list[float]], remaining: Mapping[str, int],
              parallel: int) -> str:
     """Estimate the time left: the remaining trials of each kind, in waves of ``parallel``.
@@ -216,10 +235,14 @@ def start_ray(address: str | None) -> bool:
 
 
 def _tuner(spec: Any, trials: list[dict[str, Any]], resume: bool, retry_failed: bool,
-           done: set[str] | frozenset) -> tuple[Any, ProgressLines]:
+           done: set[str] | frozenset, after_each: Callable[[], Any] | None = None,
+           ) -> tuple[Any, ProgressLines]:
     resources = {'cpu': spec.cpus_per_trial, 'gpu': spec.gpus_per_trial}
     fn = tune.with_resources(trainable, resources)
     progress = ProgressLines(trials, done)
+    callbacks: list[tune.Callback] = [progress]
+    if after_each is not None:
+        callbacks.append(AfterEachTrial(after_each))
     scheduler = StartedFirst([t['name'] for t in trials])
     path = str(Path(spec.sweep_dir) / TUNE)
     if resume and tune.Tuner.can_restore(path):
@@ -230,12 +253,12 @@ def _tuner(spec: Any, trials: list[dict[str, Any]], resume: bool, retry_failed: 
         # config; this is its only handle)
         local = getattr(tuner, '_local_tuner', None)
         if local is not None and hasattr(local, '_run_config'):
-            local._run_config.callbacks = [progress]
+            local._run_config.callbacks = callbacks
         if local is not None and hasattr(local, '_tune_config'):
             local._tune_config.scheduler = scheduler
         return tuner, progress
     run_config = tune.RunConfig(
-        name=TUNE, storage_path=spec.sweep_dir, verbose=0, callbacks=[progress],
+        name=TUNE, storage_path=spec.sweep_dir, verbose=0, callbacks=callbacks,
         failure_config=tune.FailureConfig(max_failures=MAX_FAILURES),
         checkpoint_config=tune.CheckpointConfig(num_to_keep=1))
     tuner = tune.Tuner(fn, param_space={'trial': tune.grid_search(trials)},
@@ -251,14 +274,16 @@ def _dirname(trial: Any) -> str:
 
 
 def run_trials(spec: Any, trials: list[dict[str, Any]], address: str | None, resume: bool,
-               retry_failed: bool = False, done: set[str] | frozenset = frozenset()) -> Outcome:
+               retry_failed: bool = False, done: set[str] | frozenset = frozenset(),
+               after_each: Callable[[], Any] | None = None) -> Outcome:
     """Run the trials on Ray Tune and return which finished, failed or were interrupted.
 
-    ``done``: the trials that ended in an earlier session (for the progress lines).
+    ``done``: the trials that ended in an earlier session (for the progress lines);
+    ``after_each``: called after each trial that completes (:class:`AfterEachTrial`).
     """
     started = start_ray(address)
     try:
-        tuner, _ = _tuner(spec, trials, resume, retry_failed, done)
+        tuner, _ = _tuner(spec, trials, resume, retry_failed, done, after_each)
         grid = tuner.fit()
         return _outcome(grid, trials)
     finally:

@@ -44,7 +44,8 @@ def explain(result: subprocess.CompletedProcess) -> str:
 @pytest.fixture(scope='module')
 def finished(tmp_path_factory) -> tuple[Path, subprocess.CompletedProcess]:
     storage = tmp_path_factory.mktemp('sweeps')
-    result = sweep('--seeds', '1-2', *TINY, '--storage', str(storage), '--name', 's')
+    result = sweep('--seeds', '1-2', *TINY, '--storage', str(storage), '--name', 's',
+                   '--summary', str(storage / 'kept'))
     return storage / 's', result
 
 
@@ -115,6 +116,51 @@ def test_aggregating_again_gives_identical_files_and_resume_runs_nothing(finishe
     assert 'start ' not in resumed.stdout
     assert {p.name: p.read_text() for p in (folder / 'logs').iterdir()} == logs
     assert snapshot(folder) == before
+
+
+def test_the_kept_summary_is_the_sweeps_export_rewritten_after_each_trial(finished, tmp_path):
+    folder, result = finished
+    assert result.returncode == 0, explain(result)
+    kept = folder.parent / 'kept'
+    # after seed1, seed2 and the baselines, and once more at the end
+    assert result.stdout.count(f'sweep summary: {kept}') == 4, explain(result)
+    exported = sweep('--export', str(folder), str(tmp_path / 'exp'), timeout=300)
+    assert exported.returncode == 0, explain(exported)
+    files = sorted(str(p.relative_to(kept)) for p in kept.rglob('*'))
+    assert files == sorted(str(p.relative_to(tmp_path / 'exp'))
+                           for p in (tmp_path / 'exp').rglob('*'))
+    for name in ('Sweep.md', 'results.json', 'sweep.json'):
+        assert (kept / name).read_bytes() == (tmp_path / 'exp' / name).read_bytes(), name
+    assert sorted(p.name for p in folder.parent.iterdir()) == ['kept', 's']  # no leftovers
+    assert json.loads((folder / 'sweep.json').read_text())['summary'] == str(kept)
+
+
+def test_a_kept_summary_replaces_only_its_own_sweeps(tmp_path, capsys):
+    from nav_eval.errors import SweepError
+    from nav_eval.sweeps.spec import SWEEP_FILE, summary_folder
+    from nav_eval.sweeps.tune import AfterEachTrial
+    sweep_dir, other = tmp_path / 'sweep', tmp_path / 'other'
+    for folder, seeds in ((sweep_dir, [1, 2]), (other, [3])):
+        folder.mkdir()
+        (folder / SWEEP_FILE).write_text(json.dumps({'seeds': seeds, 'summary': ''}))
+    assert summary_folder(None) == ''
+    assert summary_folder(tmp_path / 'new') == str(tmp_path / 'new')
+    (tmp_path / 'empty').mkdir()
+    assert summary_folder(tmp_path / 'empty') == str(tmp_path / 'empty')
+    # a resumed sweep's own summary, whatever summary folder its sweep.json named then
+    own = tmp_path / 'own'
+    own.mkdir()
+    (own / SWEEP_FILE).write_text(json.dumps({'seeds': [1, 2], 'summary': str(own)}))
+    assert summary_folder(own, sweep_dir) == str(own)
+    for taken, resumed in ((own, None), (other, sweep_dir), (tmp_path / 'sweep' / SWEEP_FILE,
+                                                             sweep_dir)):
+        with pytest.raises(SweepError, match="exists and is not this sweep's summary"):
+            summary_folder(taken, resumed)
+    # a failed copy is one line, and the sweep goes on
+    from types import SimpleNamespace
+    AfterEachTrial(lambda: 1 / 0).on_trial_complete(
+        0, [], SimpleNamespace(config={'trial': {'name': 'seed1'}}))
+    assert capsys.readouterr().out == 'after seed1: ZeroDivisionError: division by zero\n'
 
 
 def copy_run(source: Path, copy: Path, turn_speed: float | None, *leave_out: str) -> None:
@@ -260,12 +306,15 @@ def test_the_report_names_the_command_that_completes_each_missing_trial(finished
 
 
 def test_bad_settings_are_one_line_errors(tmp_path):
+    (tmp_path / 'docs').mkdir()
+    (tmp_path / 'docs' / 'README.md').write_text('not a summary')
     for args, words in ((['--grid', 'nonsense=1,2'], 'unknown setting'),
                         (['--grid', 'turn_speed='], 'bad setting'),
                         (['--set', 'learning_rate=fast'], 'learning_rate'),
                         (['--set', f'world={tmp_path}/no_such.xml'], 'no_such.xml not found'),
                         (['--grid', 'world=arena.xml,no_such'], "world 'no_such' not found"),
-                        (['--set', 'num_obstacles=9'], 'but num_obstacles is 9')):
+                        (['--set', 'num_obstacles=9'], 'but num_obstacles is 9'),
+                        (['--summary', str(tmp_path / 'docs')], "is not this sweep's summary")):
         result = sweep(*args, '--storage', str(tmp_path / 'runs'), '--name', 'bad',
                        timeout=120)
         assert result.returncode == 1 and words in result.stderr, explain(result)
@@ -361,8 +410,11 @@ def test_ctrl_c_leaves_no_process_and_a_resumable_sweep(tmp_path):
     from nav_eval.sweeps.spec import load_spec
     from nav_eval.sweeps.tune import StartedFirst, _tuner
     resumed = load_spec(folder)
-    tuner, _ = _tuner(resumed, resumed.trials(), True, False, set())
+    tuner, _ = _tuner(resumed, resumed.trials(), True, False, set(), after_each=print)
     assert isinstance(tuner._local_tuner._tune_config.scheduler, StartedFirst)
+    # and fresh callbacks, the summary keeper's among them
+    assert [type(c).__name__ for c in tuner._local_tuner._run_config.callbacks] == [
+        'ProgressLines', 'AfterEachTrial']
     spec = json.loads((folder / 'sweep.json').read_text())
     for seed in (1, 2):
         trial = {'run_dir': str(folder / 'trials' / f'seed{seed}'), 'gpus': 0,
