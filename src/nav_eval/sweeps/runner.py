@@ -49,7 +49,10 @@ def run_sweep(spec: SweepSpec, address: str | None, resume: bool,
         print(f'sweep interrupted: {len(outcome.finished)} of {len(trials)} trials finished; '
               f'continue with: visnav-sweep --resume {spec.sweep_dir}', flush=True)
         return INTERRUPTED
-    (keep or partial(aggregate, Path(spec.sweep_dir)))()
+    if keep is not None:  # aggregates, then writes the summary
+        keep()
+    else:
+        aggregate(Path(spec.sweep_dir))
     return 1 if outcome.failed else 0
 
 
