@@ -17,6 +17,7 @@ from nav_eval.sweeps.spec import (
     SWEEP_RESULTS,
     TRIALS,
     SweepSpec,
+    read_json,
 )
 from nav_gym.errors import NavGymError
 from nav_gym.training.config import TrainConfig
@@ -49,14 +50,6 @@ TRAIN_FIELDS = frozenset(f.name for f in dataclasses.fields(TrainConfig))
 #: only in these are one configuration (a checkpoint's save changes nothing the learner draws)
 BOOKKEEPING = ('seed', 'run_name', 'runs_dir', 'device', 'namespace', 'sim', 'sim_timeout',
                'save_replay_buffer', 'keep_replay_buffer', 'checkpoint_freq')
-
-
-def read_json(path: Path) -> Any:
-    """Return a JSON file's contents, or None when it is missing or unreadable."""
-    try:
-        return json.loads(path.read_text())
-    except (OSError, ValueError):
-        return None
 
 
 def trial_dirs(folder: Path) -> list[Path]:

@@ -215,12 +215,17 @@ def summary_folder(path: Path | None, sweep_dir: Path | None = None) -> str:
     return str(path.resolve())
 
 
-def _settings(folder: Path) -> dict[str, Any] | None:
-    """Return a sweep's or a summary's sweep.json without where it keeps its summary."""
+def read_json(path: Path) -> Any:
+    """Return a JSON file's contents, or None when it is missing or unreadable."""
     try:
-        data = json.loads((folder / SWEEP_FILE).read_text())
+        return json.loads(path.read_text())
     except (OSError, ValueError):
         return None
+
+
+def _settings(folder: Path) -> dict[str, Any] | None:
+    """Return a sweep's or a summary's sweep.json without where it keeps its summary."""
+    data = read_json(folder / SWEEP_FILE)
     if not isinstance(data, dict):
         return None
     data.pop('summary', None)

@@ -16,7 +16,6 @@ from nav_eval.sweeps.collect import (
     group_trials,
     missing_line,
     read_exported,
-    read_json,
     read_trial,
     trial_configs,
     trial_dirs,
@@ -25,6 +24,7 @@ from nav_eval.sweeps.spec import (
     BASELINES,
     FAILED_FILE,
     SWEEP_FILE,
+    read_json,
 )
 from nav_sim.core.config import HELDOUT
 
