@@ -15,6 +15,7 @@ from nav_eval.sweeps.spec import (
     SWEEP_FIGURES,
     SWEEP_REPORT,
     SweepSpec,
+    read_json,
 )
 from nav_eval.sweeps.trial import trial_finished
 
@@ -57,10 +58,7 @@ def run_sweep(spec: SweepSpec, address: str | None, resume: bool,
 
 
 def _read_failures(path: Path) -> dict[str, str]:
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, ValueError):
-        return {}
+    data = read_json(path)
     return data if isinstance(data, dict) else {}
 
 
