@@ -22,7 +22,14 @@ from pathlib import Path
 from nav_eval.seeds import CURVE, HELDOUT_BANK, TRAIN_BANK, add_many_episodes_argument, seed_text
 from nav_eval.sweeps.cluster import check_cluster
 from nav_eval.sweeps.runner import aggregate, export, run_sweep
-from nav_eval.sweeps.spec import load_spec, save_spec, spec_from_args, summary_folder
+from nav_eval.sweeps.spec import (
+    check_summary,
+    load_spec,
+    new_sweep_id,
+    save_spec,
+    spec_from_args,
+    summary_folder,
+)
 from nav_gym.cli import run_command, strip_ros_args
 
 
@@ -90,13 +97,16 @@ def main(argv: list[str] | None = None) -> None:
         check_cluster(args.address)  # within seconds, before anything is written
         if args.resume:
             spec = load_spec(args.resume)
-            if args.cpus_per_trial is not None:  # else the sweep's own
+            if args.summary is not None:  # kept in sweep.json for the next --resume
+                spec.sweep_id = spec.sweep_id or new_sweep_id()  # a sweep from before has none
+                spec.summary = summary_folder(args.summary, spec)
+                save_spec(spec)
+            elif spec.summary:
+                check_summary(Path(spec.summary), spec.sweep_id)
+            if args.cpus_per_trial is not None:  # this session's only; else the sweep's own
                 spec.cpus_per_trial = args.cpus_per_trial
             if args.gpus_per_trial != 0:
                 spec.gpus_per_trial = args.gpus_per_trial
-            if args.summary is not None:  # kept in sweep.json for the next --resume
-                spec.summary = summary_folder(args.summary, args.resume)
-                save_spec(spec)
             return run_sweep(spec, args.address, resume=True, retry_failed=args.retry_failed)
         return run_sweep(spec_from_args(args), args.address, resume=False)
 

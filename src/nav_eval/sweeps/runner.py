@@ -15,7 +15,9 @@ from nav_eval.sweeps.spec import (
     SWEEP_FIGURES,
     SWEEP_REPORT,
     SweepSpec,
+    check_summary,
     read_json,
+    summary_swap,
 )
 from nav_eval.sweeps.trial import trial_finished
 
@@ -36,8 +38,8 @@ def run_sweep(spec: SweepSpec, address: str | None, resume: bool,
     done = {t['name'] for t in trials if trial_finished(t)}
     if resume and not retry_failed:  # failed for good in an earlier session: not run again
         done |= set(_read_failures(failures))
-    keep = partial(keep_summary, Path(spec.sweep_dir), Path(spec.summary)) if spec.summary \
-        else None
+    keep = partial(keep_summary, Path(spec.sweep_dir), Path(spec.summary), spec.sweep_id) \
+        if spec.summary else None
     outcome = run_trials(spec, trials, address, resume, retry_failed, done, after_each=keep)
     if outcome.failed:
         failures.write_text(json.dumps(outcome.failed, indent=1, sort_keys=True) + '\n')
@@ -94,15 +96,18 @@ def export(sweep_dir: Path, destination: Path) -> Path:
     return destination
 
 
-def keep_summary(sweep_dir: Path, destination: Path) -> Path:
+def keep_summary(sweep_dir: Path, destination: Path, sweep_id: str) -> Path:
     """Aggregate the sweep's finished trials and replace ``destination`` with its summary form.
 
     ``--summary DEST``: the sweep calls it after each trial that completes, so that what has
     finished outlives a checkout that does not keep ``runs/``.  The new summary is written
-    beside ``destination`` and swapped in, so a stop at any moment leaves a whole one.
+    beside ``destination`` and swapped in, so a stop at any moment leaves a whole one (or,
+    between the two renames, the old one beside it, which the next check puts back).  A folder
+    that is not this sweep's summary (``sweep_id``) is never replaced.
     """
     aggregate(sweep_dir)
-    fresh, old = (destination.with_name(f'.{destination.name}.{s}') for s in ('new', 'old'))
+    check_summary(destination, sweep_id)
+    fresh, old = summary_swap(destination)
     for leftover in (fresh, old):
         shutil.rmtree(leftover, ignore_errors=True)
     export(sweep_dir, fresh)

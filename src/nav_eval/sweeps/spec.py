@@ -15,6 +15,7 @@ import dataclasses
 import itertools
 import json
 import re
+import uuid
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -69,6 +70,7 @@ class SweepSpec:
     gpus_per_trial: float = 0
     naming: int = 1  # NAMING of the code that created the sweep (older sweeps: 1)
     summary: str = ''  # --summary: a folder the sweep keeps its summary form in ('' = none)
+    sweep_id: str = ''  # tells this sweep's summary from another's ('' = a sweep from before)
 
     def configurations(self) -> list[tuple[str, dict[str, str]]]:
         """Return (config name, overrides) for every grid point, in grid order.
@@ -198,21 +200,48 @@ def load_spec(sweep_dir: Path) -> SweepSpec:
     return SweepSpec(**data)
 
 
-def summary_folder(path: Path | None, sweep_dir: Path | None = None) -> str:
+def summary_folder(path: Path | None, spec: SweepSpec) -> str:
     """Return ``--summary``'s folder as sweep.json keeps it ('' for none), or raise SweepError.
 
-    The sweep replaces the folder after each finished trial, so it must be new (or empty), or,
-    for a resumed sweep (``sweep_dir``), this sweep's own summary: its sweep.json the same.
+    The sweep replaces the folder after each finished trial, so it must lie outside the sweep's
+    directory and be new, empty or this sweep's own summary (:func:`check_summary`).
     """
     if path is None:
         return ''
-    if path.exists():
-        mine = _settings(sweep_dir) if sweep_dir is not None else None
-        own = mine is not None and _settings(path) == mine
-        if not (own or (path.is_dir() and not any(path.iterdir()))):
-            raise SweepError(f"--summary {path} exists and is not this sweep's summary: name a "
-                             'new folder (the sweep replaces it after each finished trial)')
-    return str(path.resolve())
+    destination, home = path.resolve(), Path(spec.sweep_dir).resolve()
+    if destination == home or home in destination.parents or destination in home.parents:
+        raise SweepError(f'--summary {path} overlaps the sweep directory {home}: name a folder '
+                         'outside it')
+    check_summary(destination, spec.sweep_id)
+    return str(destination)
+
+
+def summary_swap(destination: Path) -> tuple[Path, Path]:
+    """Return the folders a summary is swapped through: the new one and the one it replaces."""
+    name = destination.name
+    return destination.with_name(f'.{name}.new'), destination.with_name(f'.{name}.old')
+
+
+def check_summary(destination: Path, sweep_id: str) -> None:
+    """Raise SweepError unless ``destination`` is new, empty or the summary of sweep ``sweep_id``.
+
+    A swap that a stop cut between its two renames left ``destination`` missing and the
+    summary it was replacing beside it: that one is put back first.
+    """
+    _, old = summary_swap(destination)
+    if not destination.exists() and old.is_dir():
+        old.rename(destination)
+    if not destination.exists() or (destination.is_dir() and not any(destination.iterdir())):
+        return
+    kept = read_json(destination / SWEEP_FILE)
+    if not (sweep_id and isinstance(kept, dict) and kept.get('sweep_id') == sweep_id):
+        raise SweepError(f"--summary {destination} exists and is not this sweep's summary: name "
+                         'a new folder (the sweep replaces it after each finished trial)')
+
+
+def new_sweep_id() -> str:
+    """Return a new sweep's identity, kept in its sweep.json and so in its summary's."""
+    return uuid.uuid4().hex
 
 
 def read_json(path: Path) -> Any:
@@ -221,15 +250,6 @@ def read_json(path: Path) -> Any:
         return json.loads(path.read_text())
     except (OSError, ValueError):
         return None
-
-
-def _settings(folder: Path) -> dict[str, Any] | None:
-    """Return a sweep's or a summary's sweep.json without where it keeps its summary."""
-    data = read_json(folder / SWEEP_FILE)
-    if not isinstance(data, dict):
-        return None
-    data.pop('summary', None)
-    return data
 
 
 def save_spec(spec: SweepSpec) -> None:
@@ -289,14 +309,14 @@ def spec_from_args(args: argparse.Namespace) -> SweepSpec:
     cpus = args.cpus_per_trial if args.cpus_per_trial is not None else trial_cpus(fixed, grid)
     if cpus < 1 or args.gpus_per_trial < 0:
         raise SweepError('--cpus-per-trial must be >= 1 and --gpus-per-trial >= 0')
-    summary = summary_folder(args.summary)
     spec = SweepSpec(str(sweep_dir), seeds['seeds'], grid, fixed, seeds['train_seeds'],
                      seeds['heldout_seeds'], curve, not args.no_baselines, args.record,
-                     cpus, args.gpus_per_trial, NAMING, summary)
+                     cpus, args.gpus_per_trial, NAMING, sweep_id=new_sweep_id())
     for trial in spec.trials():  # each becomes a run name (long --set values can exceed it)
         problem = plain_name_problem('a trial name', trial['name'])
         if problem:
             raise SweepError(f'{problem}: shorten the --set or --grid values')
+    spec.summary = summary_folder(args.summary, spec)
     write_configs(spec)  # creates the sweep directory once every grid point is valid
     save_spec(spec)
     return spec

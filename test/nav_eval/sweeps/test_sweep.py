@@ -111,9 +111,13 @@ def test_aggregating_again_gives_identical_files_and_resume_runs_nothing(finishe
     again = sweep('--aggregate', str(folder), timeout=300)
     assert again.returncode == 0, explain(again)
     assert snapshot(folder) == before
-    resumed = sweep('--resume', str(folder), timeout=600)
+    settings = (folder / 'sweep.json').read_bytes()
+    # its own summary again, with this session's CPUs (not kept in sweep.json)
+    resumed = sweep('--resume', str(folder), '--summary', str(folder.parent / 'kept'),
+                    '--cpus-per-trial', '2', timeout=600)
     assert resumed.returncode == 0, explain(resumed)
-    assert 'start ' not in resumed.stdout
+    assert 'start ' not in resumed.stdout and '2 CPU per trial' in resumed.stdout
+    assert (folder / 'sweep.json').read_bytes() == settings
     assert {p.name: p.read_text() for p in (folder / 'logs').iterdir()} == logs
     assert snapshot(folder) == before
 
@@ -137,25 +141,39 @@ def test_the_kept_summary_is_the_sweeps_export_rewritten_after_each_trial(finish
 
 def test_a_kept_summary_replaces_only_its_own_sweeps(tmp_path, capsys):
     from nav_eval.errors import SweepError
-    from nav_eval.sweeps.spec import SWEEP_FILE, summary_folder
+    from nav_eval.sweeps.spec import SWEEP_FILE, SweepSpec, summary_folder, summary_swap
     from nav_eval.sweeps.tune import AfterEachTrial
-    sweep_dir, other = tmp_path / 'sweep', tmp_path / 'other'
-    for folder, seeds in ((sweep_dir, [1, 2]), (other, [3])):
-        folder.mkdir()
-        (folder / SWEEP_FILE).write_text(json.dumps({'seeds': seeds, 'summary': ''}))
-    assert summary_folder(None) == ''
-    assert summary_folder(tmp_path / 'new') == str(tmp_path / 'new')
+    mine = SweepSpec(str(tmp_path / 'runs' / 'sweep'), [1, 2], sweep_id='a1')
+    assert summary_folder(None, mine) == ''
+    assert summary_folder(tmp_path / 'new', mine) == str(tmp_path / 'new')
     (tmp_path / 'empty').mkdir()
-    assert summary_folder(tmp_path / 'empty') == str(tmp_path / 'empty')
-    # a resumed sweep's own summary, whatever summary folder its sweep.json named then
-    own = tmp_path / 'own'
-    own.mkdir()
-    (own / SWEEP_FILE).write_text(json.dumps({'seeds': [1, 2], 'summary': str(own)}))
-    assert summary_folder(own, sweep_dir) == str(own)
-    for taken, resumed in ((own, None), (other, sweep_dir), (tmp_path / 'sweep' / SWEEP_FILE,
-                                                             sweep_dir)):
+    assert summary_folder(tmp_path / 'empty', mine) == str(tmp_path / 'empty')
+    # its own summary, whatever summary folder its sweep.json named then; another sweep's,
+    # though its settings are the same, or one from before sweeps had an id, is not
+    for name, kept in (('own', {'sweep_id': 'a1'}), ('twin', {'sweep_id': 'b2'}),
+                       ('older', {}), ('docs', None)):
+        (tmp_path / name).mkdir()
+        text = 'not a summary' if kept is None else json.dumps(
+            {'seeds': [1, 2], 'summary': str(tmp_path / 'elsewhere'), **kept})
+        (tmp_path / name / SWEEP_FILE).write_text(text)
+    assert summary_folder(tmp_path / 'own', mine) == str(tmp_path / 'own')
+    for taken in ('twin', 'older', 'docs', f'own/{SWEEP_FILE}'):
         with pytest.raises(SweepError, match="exists and is not this sweep's summary"):
-            summary_folder(taken, resumed)
+            summary_folder(tmp_path / taken, mine)
+    with pytest.raises(SweepError, match="exists and is not this sweep's summary"):
+        summary_folder(tmp_path / 'own', SweepSpec(mine.sweep_dir, [1, 2]))  # a sweep from before
+    # the sweep's directory, a folder in it, or one that holds it: the swap would lose the sweep
+    for overlap in ('runs/sweep', 'runs/sweep/summary', 'runs', '.'):
+        with pytest.raises(SweepError, match='overlaps the sweep directory'):
+            summary_folder(tmp_path / overlap, mine)
+    # a stop between the swap's two renames: the summary it was replacing is put back
+    fresh, old = summary_swap(tmp_path / 'own')
+    assert (fresh.name, old.name) == ('.own.new', '.own.old')
+    (tmp_path / 'own').rename(old)
+    fresh.mkdir()
+    assert summary_folder(tmp_path / 'own', mine) == str(tmp_path / 'own')
+    assert json.loads((tmp_path / 'own' / SWEEP_FILE).read_text())['sweep_id'] == 'a1'
+    assert not old.exists()
     # a failed copy is one line, and the sweep goes on
     from types import SimpleNamespace
     AfterEachTrial(lambda: 1 / 0).on_trial_complete(
@@ -314,7 +332,8 @@ def test_bad_settings_are_one_line_errors(tmp_path):
                         (['--set', f'world={tmp_path}/no_such.xml'], 'no_such.xml not found'),
                         (['--grid', 'world=arena.xml,no_such'], "world 'no_such' not found"),
                         (['--set', 'num_obstacles=9'], 'but num_obstacles is 9'),
-                        (['--summary', str(tmp_path / 'docs')], "is not this sweep's summary")):
+                        (['--summary', str(tmp_path / 'docs')], "is not this sweep's summary"),
+                        (['--summary', str(tmp_path / 'runs')], 'overlaps the sweep directory')):
         result = sweep(*args, '--storage', str(tmp_path / 'runs'), '--name', 'bad',
                        timeout=120)
         assert result.returncode == 1 and words in result.stderr, explain(result)
