@@ -19,6 +19,40 @@ from nav_eval.analysis import stats  # noqa: E402
 from nav_eval.seeds import seed_range  # noqa: E402
 
 PROFILE_TAUS = np.linspace(0.0, 1.0, 21)
+LEGEND_WIDTH = 48  # characters a legend line may hold before a configuration's name wraps
+
+
+def _legend(ax: Any, loc: str) -> None:
+    """Draw the legend with each long configuration name wrapped at its underscores.
+
+    A name of many ``--set`` settings is wider than the axes; unwrapped, its legend pushed the
+    plot aside in the saved (tight) figure.
+    """
+    handles, labels = ax.get_legend_handles_labels()
+    ax.legend(handles, [_wrapped(label) for label in labels], loc=loc, fontsize='small')
+
+
+def _wrapped(label: str, width: int = LEGEND_WIDTH) -> str:
+    """Wrap a configuration's name between its settings (``key=value``), never inside one.
+
+    A sweep names a configuration by its settings joined with ``_``, a folder of runs with
+    ``, ``.
+    """
+    separator = ', ' if ', ' in label else '_'
+    settings: list[str] = []
+    for token in label.split(separator):  # with '_': a setting begins after a token with a value
+        if separator == '_' and settings and '=' not in settings[-1]:
+            settings[-1] += f'_{token}'
+        else:
+            settings.append(token)
+    lines = [settings[0]]
+    for setting in settings[1:]:
+        if len(lines[-1]) + len(separator) + len(setting) > width:
+            lines[-1] += separator.rstrip()
+            lines.append(setting)
+        else:
+            lines[-1] += separator + setting
+    return '\n'.join(lines)
 
 
 def _save(fig: Any, folder: Path, name: str) -> str:
@@ -47,7 +81,7 @@ def _profile(folder: Path, success: dict[str, np.ndarray]) -> str:
         profiles, PROFILE_TAUS, performance_profile_cis=cis, ax=ax,
         xlabel=r'held-out success rate ($\tau$)',
         ylabel=r'fraction of seeds with success > $\tau$')
-    ax.legend(loc='lower left', fontsize='small')
+    _legend(ax, 'lower left')
     return _save(fig, folder, 'performance_profile.png')
 
 
@@ -73,7 +107,7 @@ def _curve(folder: Path, curves: dict[str, Any]) -> str | None:
     ax.set_ylim(-0.03, 1.03)
     ax.set_title(f'held-out scenarios {seed_range(seeds)} ({len(seeds)} per checkpoint)',
                  fontsize='medium')
-    ax.legend(loc='lower right', fontsize='small')
+    _legend(ax, 'lower right')
     return _save(fig, folder, 'sample_efficiency.png')
 
 
