@@ -14,6 +14,8 @@ from nav_eval.analysis import anatomy, calibration
 from nav_eval.errors import SweepError
 from nav_eval.seeds import HELDOUT_BANK, TRAIN_BANK, seed_text
 from nav_eval.sweeps.spec import (
+    DEFAULTS,
+    LABEL_JOIN,
     SWEEP_RESULTS,
     TRIALS,
     SweepSpec,
@@ -244,7 +246,7 @@ def _difference_label(settings: dict, others: list[dict]) -> str:
     mine = _flat(settings)
     keys = sorted({k for o in others for k, v in _flat(o).items()
                    if jsonable(mine.get(k)) != jsonable(v)})
-    return ', '.join(f'{k}={mine.get(k)}' for k in keys) or 'defaults'
+    return LABEL_JOIN.join(f'{k}={mine.get(k)}' for k in keys) or DEFAULTS
 
 
 def missing_line(trial: dict[str, Any], folder: Path, spec: dict[str, Any]) -> str:

@@ -17,6 +17,7 @@ from rliable import plot_utils  # noqa: E402
 
 from nav_eval.analysis import stats  # noqa: E402
 from nav_eval.seeds import seed_range  # noqa: E402
+from nav_eval.sweeps.spec import LABEL_JOIN, SETTINGS_JOIN  # noqa: E402
 
 PROFILE_TAUS = np.linspace(0.0, 1.0, 21)
 LEGEND_WIDTH = 48  # characters a legend line may hold before a configuration's name wraps
@@ -35,14 +36,14 @@ def _legend(ax: Any, loc: str) -> None:
 def _wrapped(label: str, width: int = LEGEND_WIDTH) -> str:
     """Wrap a configuration's name between its settings (``key=value``), never inside one.
 
-    A sweep names a configuration by its settings joined with ``_``, a folder of runs with
-    ``, ``.
+    A sweep names a configuration by its settings joined with ``SETTINGS_JOIN``, a folder of
+    runs with ``LABEL_JOIN``.
     """
-    separator = ', ' if ', ' in label else '_'
+    separator = LABEL_JOIN if LABEL_JOIN in label else SETTINGS_JOIN
     settings: list[str] = []
-    for token in label.split(separator):  # with '_': a setting begins after a token with a value
-        if separator == '_' and settings and '=' not in settings[-1]:
-            settings[-1] += f'_{token}'
+    for token in label.split(separator):  # by SETTINGS_JOIN: a setting begins after a value
+        if separator == SETTINGS_JOIN and settings and '=' not in settings[-1]:
+            settings[-1] += f'{SETTINGS_JOIN}{token}'
         else:
             settings.append(token)
     lines = [settings[0]]

@@ -51,6 +51,11 @@ SUMMARY_FILES = (SWEEP_REPORT, SWEEP_RESULTS, SWEEP_FILE, SWEEP_FIGURES, CONFIGS
 #: configuration only when there are several
 NAMING = 2
 MAX_NAME = 120  # a configuration name is a file name (configs/<name>.yaml): keep it short
+DEFAULTS = 'defaults'  # the configuration without a setting of its own
+#: what joins the settings (``key=value``) in a configuration's name ...
+SETTINGS_JOIN = '_'
+#: ... and in the label of a folder of runs (``visnav-sweep --aggregate``), which is no file name
+LABEL_JOIN = ', '
 
 
 @dataclass
@@ -83,8 +88,8 @@ class SweepSpec:
         for values in itertools.product(*(self.grid[k] for k in keys)):
             point = dict(zip(keys, values, strict=True))
             named = point or (self.fixed if self.naming >= 2 else {})
-            name = slug('_'.join(f'{k}={v}' for k, v in named.items()))[:MAX_NAME]
-            out.append((name if named else 'defaults', {**self.fixed, **point}))
+            name = slug(SETTINGS_JOIN.join(f'{k}={v}' for k, v in named.items()))[:MAX_NAME]
+            out.append((name if named else DEFAULTS, {**self.fixed, **point}))
         names = [name for name, _ in out]
         for name in names:
             if names.count(name) > 1:  # they would share one config file and trial folders
@@ -102,7 +107,7 @@ class SweepSpec:
         configurations = self.configurations()
         for config_name, _ in configurations:
             config_file = str(root / CONFIGS / f'{config_name}.yaml')
-            alone = len(configurations) == 1 if self.naming >= 2 else config_name == 'defaults'
+            alone = len(configurations) == 1 if self.naming >= 2 else config_name == DEFAULTS
             prefix = '' if alone else f'{config_name}_'
             for seed in self.seeds:
                 name = f'{prefix}seed{seed}'
