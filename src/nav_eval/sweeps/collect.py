@@ -85,11 +85,12 @@ def exported_dirs(folder: Path) -> list[Path]:
 def read_exported(summaries: list[Path]) -> list[dict[str, Any]]:
     """Return the trials of sweep summaries, from their per-seed rows, each trial once.
 
-    A summary keeps each trial's final rates, not its episodes: such a trial (``exported``)
-    counts in the aggregates and the probability of improvement, and has no curve, anatomy,
-    calibration or pooled bank row.  Its settings are read as an older run's config is
-    (:func:`_summary_settings`).  Its name is ``<summary>:<trial>``.  A trial that two summaries
-    hold (a comparison's summary beside the sweep's own) counts once: the first read.
+    A summary keeps each trial's final rates and its curve's success rates, not its episodes:
+    such a trial (``exported``) counts in the aggregates, the probability of improvement and the
+    curve, and has no anatomy, calibration or pooled bank row.  Its settings are read as an
+    older run's config is (:func:`_summary_settings`).  Its name is ``<summary>:<trial>``.  A
+    trial that two summaries hold (a comparison's summary beside the sweep's own) counts once:
+    the first read.
     """
     trials, seen = [], set()
     for summary in summaries:
@@ -110,10 +111,20 @@ def read_exported(summaries: list[Path]) -> list[dict[str, Any]]:
                      for split in FINAL_SETS if f'{split}_success_rate' in row}
             trials.append({'name': f"{summary.name}:{row['trial']}", 'run_dir': summary,
                            'seed': row['seed'], 'settings': settings,
-                           'final': final, 'curve': {}, 'anatomy': [], 'values': [],
+                           'final': final, 'curve': _summary_curve(row), 'anatomy': [],
+                           'values': [],
                            'curve_values': {}, 'finished': True, 'exported': True,
                            'wall_clock_s': row.get('wall_clock_s'), 'steps': row.get('steps')})
     return trials
+
+
+def _summary_curve(row: dict[str, Any]) -> dict[int, dict[str, Any]]:
+    """Return a summary trial's curve points as :func:`read_trial` gives a run's.
+
+    Summaries exported before 2026-11-29 kept none.
+    """
+    return {int(steps): {'success_rate': rate, 'seeds': row['curve_seeds']}
+            for steps, rate in row.get('curve', {}).items()}
 
 
 def _summary_settings(settings: dict[str, Any], row: dict[str, Any], summary: str

@@ -40,6 +40,9 @@ def per_seed_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
                 for rate in RATES:
                     row[f'{split}_{rate}'] = entry['summary'][rate]
                 row[f'{split}_episodes'] = entry['summary']['episodes']
+            if t['curve']:  # a summary keeps the trial's curve: comparisons pool it
+                row['curve'] = {str(s): p['success_rate'] for s, p in sorted(t['curve'].items())}
+                row['curve_seeds'] = next(iter(t['curve'].values()))['seeds']
             rows.append(row)
     return rows
 
@@ -106,14 +109,19 @@ def configuration_stats(groups: dict[str, list[dict]]) -> dict[str, Any]:
 def curve_scores(groups: dict[str, list[dict]]) -> dict[str, Any]:
     """Return per configuration the checkpoints every run evaluated and a score matrix.
 
-    A summary's trials have no curve: the curve is their configuration's runs' alone.
+    A summary's trial counts where its summary kept its curve (summaries from before
+    2026-11-29 kept none): the curve is its configuration's runs' and those trials'.
     """
     out = {}
     for config, everyone in groups.items():
-        members = [t for t in everyone if not t['exported']]  # a summary keeps no curve
+        members = [t for t in everyone if not t['exported'] or t['curve']]
         common = sorted(set.intersection(*(set(t['curve']) for t in members))) if members \
             else []
         if not common:
+            continue
+        if len({tuple(t['curve'][s]['seeds']) for t in members for s in common}) > 1:
+            print(f'{config}: no sample-efficiency curve: its trials evaluated their checkpoints '
+                  'on different held-out scenarios')
             continue
         matrix = np.array([[[t['curve'][s]['success_rate'] for s in common]] for t in members])
         out[config] = {'steps': common, 'scores': matrix,

@@ -1,4 +1,8 @@
-"""The sample-efficiency curve takes the checkpoints of the schedule, not those a stop saved."""
+"""The sample-efficiency curve: the scheduled checkpoints, pooled over runs and summaries.
+
+A curve takes the checkpoints of the schedule, not those a stop saved, and pools trials only on
+the same held-out scenarios.
+"""
 
 from __future__ import annotations
 
@@ -6,6 +10,7 @@ import json
 
 import pytest
 
+from nav_eval.sweeps.statistics import curve_scores
 from nav_eval.sweeps.trial import missing_evaluations
 from nav_gym.training.config import TrainConfig
 from nav_gym.training.run_dir import CONFIG, checkpoint_path, on_schedule
@@ -51,3 +56,21 @@ def test_a_sweeps_report_leaves_out_a_stops_curve_point_that_an_older_sweep_eval
     curve = read_trial(run)['curve']
     assert {steps: point['success_rate'] for steps, point in curve.items()} == {100: 0.5,
                                                                                  200: 0.75}
+
+
+def _trial(curve: dict[int, float], exported: bool, seeds=(201, 202)) -> dict:
+    return {'curve': {s: {'success_rate': r, 'seeds': list(seeds)} for s, r in curve.items()},
+            'exported': exported}
+
+
+def test_the_curve_pools_runs_with_summaries_that_kept_theirs_on_the_same_scenarios(capsys):
+    run = _trial({100: 0.5, 200: 0.9}, exported=False)
+    kept = _trial({100: 0.25, 200: 1.0}, exported=True)
+    older = _trial({}, exported=True)  # a summary from before summaries kept curves
+    curves = curve_scores({'c': [run, kept, older]})
+    assert curves['c']['steps'] == [100, 200]
+    assert curves['c']['scores'].tolist() == [[[0.5, 0.9]], [[0.25, 1.0]]]
+    # on other held-out scenarios the seeds' rates are not one curve's: none, and a line says why
+    elsewhere = _trial({100: 1.0, 200: 1.0}, exported=True, seeds=(201, 203))
+    assert curve_scores({'c': [run, elsewhere]}) == {}
+    assert 'evaluated their checkpoints on different held-out scenarios' in capsys.readouterr().out
