@@ -90,9 +90,9 @@ def read_exported(summaries: list[Path]) -> list[dict[str, Any]]:
     curve, and has no anatomy, calibration or pooled bank row.  Its settings are read as an
     older run's config is (:func:`_summary_settings`).  Its name is ``<summary>:<trial>``.  A
     trial that two summaries hold (a comparison's summary beside the sweep's own) counts once:
-    the first read.
+    the first read, with the curve of a later copy where the first kept none.
     """
-    trials, seen = [], set()
+    trials, seen = [], {}
     for summary in summaries:
         data = read_json(summary / SWEEP_RESULTS) or {}
         for row in data.get('per_seed', []):
@@ -104,24 +104,24 @@ def read_exported(summaries: list[Path]) -> list[dict[str, Any]]:
             key = json.dumps([row['seed'], jsonable(settings),
                               [f'{v:.4g}' if isinstance(v, float) else v for v in figures]])
             if key in seen:
+                seen[key]['curve'] = seen[key]['curve'] or _summary_curve(row)
                 continue
-            seen.add(key)
             final = {split: {'summary': {**{rate: row[f'{split}_{rate}'] for rate in RATES},
                                          'episodes': row[f'{split}_episodes']}}
                      for split in FINAL_SETS if f'{split}_success_rate' in row}
-            trials.append({'name': f"{summary.name}:{row['trial']}", 'run_dir': summary,
-                           'seed': row['seed'], 'settings': settings,
-                           'final': final, 'curve': _summary_curve(row), 'anatomy': [],
-                           'values': [],
-                           'curve_values': {}, 'finished': True, 'exported': True,
-                           'wall_clock_s': row.get('wall_clock_s'), 'steps': row.get('steps')})
+            seen[key] = {'name': f"{summary.name}:{row['trial']}", 'run_dir': summary,
+                         'seed': row['seed'], 'settings': settings,
+                         'final': final, 'curve': _summary_curve(row), 'anatomy': [],
+                         'values': [], 'curve_values': {}, 'finished': True, 'exported': True,
+                         'wall_clock_s': row.get('wall_clock_s'), 'steps': row.get('steps')}
+            trials.append(seen[key])
     return trials
 
 
 def _summary_curve(row: dict[str, Any]) -> dict[int, dict[str, Any]]:
     """Return a summary trial's curve points as :func:`read_trial` gives a run's.
 
-    Summaries exported before 2026-11-29 kept none.
+    Older summaries kept none.
     """
     return {int(steps): {'success_rate': rate, 'seeds': row['curve_seeds']}
             for steps, rate in row.get('curve', {}).items()}

@@ -40,9 +40,10 @@ def per_seed_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
                 for rate in RATES:
                     row[f'{split}_{rate}'] = entry['summary'][rate]
                 row[f'{split}_episodes'] = entry['summary']['episodes']
-            if t['curve']:  # a summary keeps the trial's curve: comparisons pool it
-                row['curve'] = {str(s): p['success_rate'] for s, p in sorted(t['curve'].items())}
-                row['curve_seeds'] = next(iter(t['curve'].values()))['seeds']
+            scenarios = {tuple(p['seeds']) for p in t['curve'].values()}
+            if len(scenarios) == 1:  # a summary keeps the trial's curve: comparisons pool it
+                row['curve'] = {str(s): p['success_rate'] for s, p in t['curve'].items()}
+                row['curve_seeds'] = list(scenarios.pop())
             rows.append(row)
     return rows
 
@@ -109,8 +110,10 @@ def configuration_stats(groups: dict[str, list[dict]]) -> dict[str, Any]:
 def curve_scores(groups: dict[str, list[dict]]) -> dict[str, Any]:
     """Return per configuration the checkpoints every run evaluated and a score matrix.
 
-    A summary's trial counts where its summary kept its curve (summaries from before
-    2026-11-29 kept none): the curve is its configuration's runs' and those trials'.
+    A summary's trial counts where its summary kept its curve (older summaries kept none): the
+    curve is its configuration's runs' and those trials'.  A line names the summaries' trials
+    that it leaves out, and a configuration whose trials evaluated their checkpoints on
+    different held-out scenarios gets no curve, with a line that says so.
     """
     out = {}
     for config, everyone in groups.items():
@@ -119,10 +122,13 @@ def curve_scores(groups: dict[str, list[dict]]) -> dict[str, Any]:
             else []
         if not common:
             continue
-        if len({tuple(t['curve'][s]['seeds']) for t in members for s in common}) > 1:
+        if len({tuple(sorted(t['curve'][s]['seeds'])) for t in members for s in common}) > 1:
             print(f'{config}: no sample-efficiency curve: its trials evaluated their checkpoints '
                   'on different held-out scenarios')
             continue
+        if left := [t['name'] for t in everyone if t['exported'] and not t['curve']]:
+            print(f"{config}: the sample-efficiency curve leaves out {', '.join(left)} (their "
+                  'summaries kept no curve)')
         matrix = np.array([[[t['curve'][s]['success_rate'] for s in common]] for t in members])
         out[config] = {'steps': common, 'scores': matrix,
                        'seeds': members[0]['curve'][common[0]]['seeds']}

@@ -10,7 +10,8 @@ import json
 
 import pytest
 
-from nav_eval.sweeps.statistics import curve_scores
+from nav_eval.sweeps.collect import read_exported
+from nav_eval.sweeps.statistics import curve_scores, per_seed_rows
 from nav_eval.sweeps.trial import missing_evaluations
 from nav_gym.training.config import TrainConfig
 from nav_gym.training.run_dir import CONFIG, checkpoint_path, on_schedule
@@ -58,19 +59,58 @@ def test_a_sweeps_report_leaves_out_a_stops_curve_point_that_an_older_sweep_eval
                                                                                  200: 0.75}
 
 
-def _trial(curve: dict[int, float], exported: bool, seeds=(201, 202)) -> dict:
+def _trial(curve: dict[int, float], exported: bool, seeds=(201, 202), name='t') -> dict:
     return {'curve': {s: {'success_rate': r, 'seeds': list(seeds)} for s, r in curve.items()},
-            'exported': exported}
+            'exported': exported, 'name': name}
 
 
 def test_the_curve_pools_runs_with_summaries_that_kept_theirs_on_the_same_scenarios(capsys):
     run = _trial({100: 0.5, 200: 0.9}, exported=False)
     kept = _trial({100: 0.25, 200: 1.0}, exported=True)
-    older = _trial({}, exported=True)  # a summary from before summaries kept curves
+    older = _trial({}, exported=True, name='old:seed1')  # a summary that kept no curve
     curves = curve_scores({'c': [run, kept, older]})
     assert curves['c']['steps'] == [100, 200]
     assert curves['c']['scores'].tolist() == [[[0.5, 0.9]], [[0.25, 1.0]]]
+    assert 'leaves out old:seed1' in capsys.readouterr().out
+    # the same scenarios in another order are the same scenarios
+    assert curve_scores({'c': [run, _trial({100: 1.0, 200: 1.0}, True, seeds=(202, 201))]})
     # on other held-out scenarios the seeds' rates are not one curve's: none, and a line says why
     elsewhere = _trial({100: 1.0, 200: 1.0}, exported=True, seeds=(201, 203))
     assert curve_scores({'c': [run, elsewhere]}) == {}
     assert 'evaluated their checkpoints on different held-out scenarios' in capsys.readouterr().out
+
+
+def _summary(folder, trials: list[dict]) -> None:
+    """Write ``trials`` as a summary's results.json writes them (keys sorted as text)."""
+    folder.mkdir()
+    (folder / 'results.json').write_text(json.dumps(
+        {'per_seed': per_seed_rows({'c': trials}), 'settings': {}}, sort_keys=True))
+
+
+def test_a_summary_keeps_each_trials_curve_through_json_and_a_later_copy_fills_a_first_without(
+        tmp_path, capsys):
+    final = {'heldout': {'summary': {'success_rate': 1.0, 'collision_rate': 0.0,
+                                     'timeout_rate': 0.0, 'mean_spl': 0.5, 'episodes': 2}}}
+
+    def trial(name, curve, **more):
+        return {'seed': 1, 'steps': 100_000, 'wall_clock_s': 1.0, 'final': final,
+                **_trial(curve, exported=False, name=name), **more}
+
+    # 50000 sorts after 100000 as text: the curve must come back by number
+    kept = trial('seed1', {50_000: 0.5, 100_000: 0.75})
+    _summary(tmp_path / 'a', [trial('seed1', {})])  # an older copy of the same trial: no curve
+    _summary(tmp_path / 'b', [kept])
+    _summary(tmp_path / 'c', [trial('seed2', {50_000: 1.0, 100_000: 1.0}, wall_clock_s=2.0)])
+    # a trial whose checkpoints were evaluated on different scenarios keeps no curve
+    mixed = trial('seed3', {50_000: 1.0}, wall_clock_s=3.0)
+    mixed['curve'][100_000] = {'success_rate': 1.0, 'seeds': [203]}
+    assert 'curve' not in per_seed_rows({'c': [mixed]})[0]
+    trials = read_exported([tmp_path / 'a', tmp_path / 'b', tmp_path / 'c'])
+    assert [t['name'] for t in trials] == ['a:seed1', 'c:seed2']  # b's seed1 is a's, once
+    assert trials[0]['curve'] == kept['curve']
+    assert curve_scores({'c': trials})['c']['steps'] == [50_000, 100_000]
+    # a summary's trial without a curve still counts elsewhere; the curve says it leaves it out
+    _summary(tmp_path / 'd', [trial('seed4', {}, wall_clock_s=4.0)])
+    trials += read_exported([tmp_path / 'd'])
+    assert curve_scores({'c': trials})['c']['scores'].shape == (2, 1, 2)
+    assert 'the sample-efficiency curve leaves out d:seed4' in capsys.readouterr().out
