@@ -29,6 +29,11 @@ from nav_eval.sweeps.spec import (
 from nav_sim.core.config import HELDOUT
 
 
+def _scenarios(points: Any) -> set[tuple[int, ...]]:
+    """Return the held-out scenarios of curve points: one entry per set, whatever its order."""
+    return {tuple(sorted(p['seeds'])) for p in points}
+
+
 def per_seed_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
     """Return one row per trial: rates and SPL on the training and held-out sets."""
     rows = []
@@ -40,7 +45,7 @@ def per_seed_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
                 for rate in RATES:
                     row[f'{split}_{rate}'] = entry['summary'][rate]
                 row[f'{split}_episodes'] = entry['summary']['episodes']
-            scenarios = {tuple(p['seeds']) for p in t['curve'].values()}
+            scenarios = _scenarios(t['curve'].values())
             if len(scenarios) == 1:  # a summary keeps the trial's curve: comparisons pool it
                 row['curve'] = {str(s): p['success_rate'] for s, p in t['curve'].items()}
                 row['curve_seeds'] = list(scenarios.pop())
@@ -122,7 +127,7 @@ def curve_scores(groups: dict[str, list[dict]]) -> dict[str, Any]:
             else []
         if not common:
             continue
-        if len({tuple(sorted(t['curve'][s]['seeds'])) for t in members for s in common}) > 1:
+        if len(_scenarios(t['curve'][s] for t in members for s in common)) > 1:
             print(f'{config}: no sample-efficiency curve: its trials evaluated their checkpoints '
                   'on different held-out scenarios')
             continue
