@@ -272,3 +272,28 @@ def test_the_bags_replay_the_foxglove_layout(run_dir, evaluated):
                          .read_text()) for e in entry['episodes']]
     assert [(g.pose.position.x, g.pose.position.y) for g in goals] == [
         pytest.approx(tuple(t['scenario']['goal']), abs=1e-3) for t in traces]
+
+
+def test_a_recurrent_learner_is_evaluated_diagnosed_and_reported(tmp_path, spaces_only):
+    """A checkpoint of the recurrent Q-network goes through evaluation, diagnosis and report.
+
+    Its actions are the argmax of the Q-values it logs, the diagnosis re-runs its failed
+    episode with the same history and reproduces every action, and the report names it.
+    """
+    run = tmp_path / 'recurrent'
+    run.mkdir()
+    make_tiny_run(run, spaces_only, steps=20, max_episode_steps=10, frame_stack=2,
+                  recurrent=8)
+    evaluated = runner.evaluate(run, plan_sets(run, ['dqn_heldout'], (101,), (201, 202)),
+                                record=False)
+    (entry,) = evaluated['sets']
+    assert entry['summary']['episodes'] == 2
+    for episode in entry['episodes']:
+        trace = json.loads((run / 'eval' / 'traces' / 'dqn_heldout' /
+                            f"seed_{episode['seed']}.json").read_text())
+        assert all(s['action'] == int(np.argmax(s['q_values'])) for s in trace['steps'])
+    result = diagnose_run(run)
+    assert result['set'] == 'dqn_heldout' and result['outcome'] != 'success'
+    assert any('reproduced all' in e for v in result['layers'] for e in v['evidence'])
+    text = run_report.write_report(run).read_text()
+    assert 'an LSTM of 8 units' in text and '| recurrent | 8 |' in text

@@ -357,6 +357,10 @@ def test_the_lstm_reads_the_window_oldest_first_from_a_zero_state_its_burn_in():
     planes = obs.clone()
     planes[:, 9:, 1:] = 0.5
     assert th.equal(net(planes), out)
+    # and it is trained: the loss on the latest output reaches the oldest frame (not detached)
+    older.requires_grad_(True)
+    net(older)[:, :16].sum().backward()
+    assert older.grad[:, :3].abs().sum() > 0
 
 
 def test_a_window_needs_two_frames_and_the_flag_needs_a_stack():
