@@ -277,9 +277,12 @@ def test_the_bags_replay_the_foxglove_layout(run_dir, evaluated):
 def test_a_recurrent_learner_is_evaluated_diagnosed_and_reported(tmp_path, spaces_only):
     """A checkpoint of the recurrent Q-network goes through evaluation, diagnosis and report.
 
-    Its actions are the argmax of the Q-values it logs, the diagnosis re-runs its failed
-    episode with the same history and reproduces every action, and the report names it.
+    Through the ROS graph, the second episode's Q-values are the network's on windows built
+    here by hand from its own frames (begun afresh: the first frame stands in before it, no
+    previous action); its diagnosis re-runs it alone and reproduces every action; the report
+    names the learner.
     """
+    from nav_gym.training.learner import load_checkpoint
     run = tmp_path / 'recurrent'
     run.mkdir()
     make_tiny_run(run, spaces_only, steps=20, max_episode_steps=10, frame_stack=2,
@@ -287,13 +290,22 @@ def test_a_recurrent_learner_is_evaluated_diagnosed_and_reported(tmp_path, space
     evaluated = runner.evaluate(run, plan_sets(run, ['dqn_heldout'], (101,), (201, 202)),
                                 record=False)
     (entry,) = evaluated['sets']
-    assert entry['summary']['episodes'] == 2
-    for episode in entry['episodes']:
-        trace = json.loads((run / 'eval' / 'traces' / 'dqn_heldout' /
-                            f"seed_{episode['seed']}.json").read_text())
-        assert all(s['action'] == int(np.argmax(s['q_values'])) for s in trace['steps'])
-    result = diagnose_run(run)
-    assert result['set'] == 'dqn_heldout' and result['outcome'] != 'success'
+    assert [e['seed'] for e in entry['episodes']] == [201, 202]
+    folder = run / 'eval' / 'traces' / 'dqn_heldout'
+    steps = json.loads((folder / 'seed_202.json').read_text())['steps']
+    with np.load(folder / 'seed_202_frames.npz') as data:
+        frames = data['obs']
+    model = load_checkpoint(run / 'final_model.zip', device='cpu')
+    for t, step in enumerate(steps):
+        planes = np.zeros((3, 84, 84), np.uint8)
+        if t:
+            planes[steps[t - 1]['action']] = 255
+        window = np.concatenate([frames[max(t - 1, 0)], frames[t], planes])
+        tensor, _ = model.policy.obs_to_tensor(window)
+        q_values = model.q_net(tensor).detach().numpy()[0]
+        assert np.allclose(step['q_values'], q_values, atol=1e-4), t
+        assert step['action'] == int(np.argmax(step['q_values']))
+    result = diagnose_run(run, 'dqn_heldout', 202)
     assert any('reproduced all' in e for v in result['layers'] for e in v['evidence'])
     text = run_report.write_report(run).read_text()
     assert 'an LSTM of 8 units' in text and '| recurrent | 8 |' in text

@@ -28,9 +28,9 @@ untouched (the workshop's learner, bit for bit: config/workshop.yaml).
 - ``frame_stack``: the agent's last k frames as its input, replayed from single frames
   (:mod:`nav_gym.training.memory`; DRQN's comparison, Hausknecht & Stone 2015);
 - ``recurrent``: the window of ``frame_stack`` frames read by an LSTM over each frame's CNN
-  features instead of stacked into the first convolution (DRQN; R2D2's burn-in, from a zero
-  state at the window's oldest frame, with the gradient through it:
-  :mod:`nav_gym.training.recurrent`);
+  features instead of stacked into the first convolution (DRQN, Hausknecht & Stone 2015): the
+  frames before the latest build its state from zero, as R2D2's burn-in does, but with the
+  gradient through them (:mod:`nav_gym.training.recurrent`);
 - ``aux_depth``: an auxiliary loss of this weight, a linear head on the online network's
   features predicting the camera's coarse depth of each sampled observation (Mirowski et al.
   2017; UNREAL, Jaderberg et al. 2017); the targets come from ``info['depth']`` into a buffer

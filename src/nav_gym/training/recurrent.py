@@ -13,9 +13,9 @@ values after it, ``previous_action``).
 So the state always begins at the window's oldest frame: the ``k - 1`` frames before the latest
 are the burn-in that builds the state, the loss is on the latest, and a window never crosses an
 episode's start (the episode's first frame stands in before it, as the stack pads).  Unlike
-R2D2's burn-in, these frames are not detached: with the loss on one step, the gradient through
-them (DRQN's updates over the whole window) is what teaches the LSTM what to keep, and with a
-zero start state there is no stored, stale state for a gradient-free burn-in to refresh.  Acting
+R2D2's burn-in, these frames are not detached: with the loss on one step, backpropagation
+through the whole window is what teaches the LSTM what to keep, and with a zero start state
+there is no stored, stale state for a gradient-free burn-in to refresh.  Acting
 builds the same window and runs the same pass: training, lockstep and closed-loop evaluation,
 the policy node and the ONNX export share one definition of the memory, and no recurrent
 state is carried between decisions.  What this leaves out, against R2D2: a state carried over
