@@ -19,6 +19,7 @@ from nav_eval import seeds
 from nav_eval.analysis.anatomy import goal_in_view
 from nav_eval.errors import EvaluationError
 from nav_eval.evaluation import runner
+from nav_eval.evaluation.selection import load_episode
 from nav_eval.evaluation.sets import DEFAULT_SETS, plan_sets, run_config
 from nav_eval.reporting import run_report
 from nav_eval.reporting.diagnosis_report import diagnose_run
@@ -291,10 +292,8 @@ def test_a_recurrent_learner_is_evaluated_diagnosed_and_reported(tmp_path, space
                                 record=False)
     (entry,) = evaluated['sets']
     assert [e['seed'] for e in entry['episodes']] == [201, 202]
-    folder = run / 'eval' / 'traces' / 'dqn_heldout'
-    steps = json.loads((folder / 'seed_202.json').read_text())['steps']
-    with np.load(folder / 'seed_202_frames.npz') as data:
-        frames = data['obs']
+    trace, frames = load_episode(run / 'eval', 'dqn_heldout', 202)
+    steps = trace['steps']
     model = load_checkpoint(run / 'final_model.zip', device='cpu')
     for t, step in enumerate(steps):
         planes = np.zeros((3, 84, 84), np.uint8)
