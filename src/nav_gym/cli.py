@@ -18,7 +18,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 from nav_gym.env.config import SIM_MODES, EnvConfig, parse_mapping
-from nav_sim.errors import VisnavError, describe_exception
+from nav_sim.errors import VisnavError, describe_exception, is_interrupt
 
 #: the env settings that say how to reach the sim, as options of every command that does
 ENV_OPTIONS = ('namespace', 'sim', 'sim_timeout')
@@ -88,11 +88,15 @@ def run_command(name: str, body: Callable[[], int]) -> None:
         print(f'{name}: error: {exc}', file=sys.stderr)
         code = 1
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, not a trace
-        if debug:
-            traceback.print_exc()
-        print(f'{name}: error: unexpected {describe_exception(exc)} (a bug: please report it '
-              f'with the traceback that {DEBUG_ENV}=1 shows)', file=sys.stderr)
-        code = 1
+        if is_interrupt(exc):  # a Ctrl-C that a C extension reported as another error
+            print(f'{name}: interrupted', file=sys.stderr)
+            code = 130
+        else:
+            if debug:
+                traceback.print_exc()
+            print(f'{name}: error: unexpected {describe_exception(exc)} (a bug: please report '
+                  f'it with the traceback that {DEBUG_ENV}=1 shows)', file=sys.stderr)
+            code = 1
     sys.exit(code)
 
 

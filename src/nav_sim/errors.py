@@ -57,3 +57,21 @@ def describe_exception(exc: BaseException) -> str:
     """Name an exception and its message's first line: ``ValueError: bad value``."""
     lines = str(exc).strip().splitlines()
     return f'{type(exc).__name__}: {lines[0]}' if lines else type(exc).__name__
+
+
+def is_interrupt(exc: BaseException) -> bool:
+    """Whether ``exc`` is a Ctrl-C: a KeyboardInterrupt, or an error whose cause or context is one.
+
+    A KeyboardInterrupt that Python's signal handler raises while a C extension's call runs Python
+    code (rclpy's ``take_response`` building a service response in an executor's spin) can leave
+    the call with a result and the exception set; CPython then raises ``SystemError: <...>
+    returned a result with an exception set`` with the interrupt as its cause.
+    """
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, KeyboardInterrupt):
+            return True
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return False

@@ -43,7 +43,7 @@ from nav_gym.training.run_dir import (
     checkpoints,
     load_config,
 )
-from nav_sim.errors import NavSimError, describe_exception
+from nav_sim.errors import NavSimError, describe_exception, is_interrupt
 from nav_sim.viz.options import add_live_argument
 
 
@@ -176,7 +176,10 @@ def _train(config: TrainConfig, run_dir: Path, resume: bool, hint: str,
         except NavSimError as exc:  # the sim died or stopped answering
             outcome, failure = 'sim failed', _sim_failure(env, exc)
         except Exception as exc:  # noqa: BLE001 - a library's error: keep what was learned
-            outcome, failure, error = 'failed', f'unexpected {describe_exception(exc)}', exc
+            if is_interrupt(exc):  # a Ctrl-C that a C extension reported as another error
+                outcome = 'interrupted'
+            else:
+                outcome, failure, error = 'failed', f'unexpected {describe_exception(exc)}', exc
         summary = _summary(config, run_dir, resume, outcome, model, steps_before,
                            time.perf_counter() - start, env)
         saved: list[str] = []

@@ -205,6 +205,37 @@ def test_a_killed_embedded_sim_saves_a_checkpoint_and_says_how_to_resume(tmp_pat
     assert temporary_files(run_dir) == []
 
 
+def test_a_ctrl_c_reported_as_another_error_saves_a_checkpoint_as_ctrl_c_does(
+        tmp_path, namespace, monkeypatch, capsys):
+    # the race CI hit (2026-11-29): the Ctrl-C came out of rclpy's take_response as
+    # "SystemError: ... returned a result with an exception set", its cause the interrupt, and
+    # the run failed (exit 1) instead of stopping as Ctrl-C does
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    from nav_gym.training import config as train_config
+
+    class ReportedAsAnotherError(BaseCallback):
+        def _on_step(self) -> bool:
+            if self.num_timesteps == 30:
+                try:
+                    raise KeyboardInterrupt
+                except KeyboardInterrupt as exc:
+                    raise SystemError('<built-in method take_response> returned a result '
+                                      'with an exception set') from exc
+            return True
+
+    monkeypatch.setattr(train, 'training_callback', lambda env: ReportedAsAnotherError())
+    config = train_config.build(None, {'sim': 'embedded', 'namespace': namespace,
+                                       'learning_starts': 100, 'buffer_size': 500,
+                                       'total_timesteps': 200, 'device': 'cpu'})
+    run_dir = tmp_path / 'run'
+    run_dir.mkdir()
+    summary = train.train(config, run_dir)
+    assert summary['outcome'] == 'interrupted' and summary['num_timesteps'] == 30
+    assert f'interrupted at step 30: checkpoint {run_dir}' in capsys.readouterr().out
+    assert checkpoints(run_dir)[-1][0] == 30 and buffer_step(run_dir) == 30
+
+
 def no_space(*args, **kwargs):
     raise OSError(errno.ENOSPC, 'No space left on device')
 

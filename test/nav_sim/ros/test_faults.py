@@ -18,7 +18,7 @@ import pytest
 from rclpy.parameter_client import AsyncParameterClient
 
 from helpers import interrupt
-from nav_sim.errors import ScenarioError, SimUnavailableError
+from nav_sim.errors import ScenarioError, SimUnavailableError, is_interrupt
 from nav_sim.ros.client import SimClient
 from nav_sim.ros.process import SimProcess, executable_command, ros_args
 
@@ -261,6 +261,39 @@ def test_ctrl_c_during_a_take_is_an_interrupt_not_a_runtime_error():
     with pytest.raises(RuntimeError, match='something else'):
         take(SimpleNamespace(handle=SimpleNamespace(take_message=broken), msg_type=object,
                               raw=False))
+
+
+def reported_as_another_error() -> SystemError:
+    """Return the error CPython raises when a C call returns a result with a Ctrl-C set."""
+    try:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:  # as _Py_CheckFunctionResult: the interrupt its cause
+            raise SystemError('<built-in method take_response of PyCapsule object> returned a '
+                              'result with an exception set') from exc
+    except SystemError as error:
+        return error
+
+
+def test_a_ctrl_c_reported_as_another_error_is_an_interrupt(capsys):
+    # the race CI hit (2026-11-29): the KeyboardInterrupt of a Ctrl-C raised while rclpy's
+    # executor took a service response came out as SystemError, and the trainer failed (exit
+    # 1, "unexpected SystemError") instead of stopping as Ctrl-C does (exit 130)
+    from nav_gym.cli import run_command
+
+    error = reported_as_another_error()
+    assert is_interrupt(error) and is_interrupt(KeyboardInterrupt())
+    assert not is_interrupt(SystemError('returned a result with an exception set'))
+    looped = ValueError('a cycle')
+    looped.__context__ = RuntimeError('its context')
+    looped.__context__.__context__ = looped
+    assert not is_interrupt(looped)
+
+    def body() -> int:
+        raise error
+    with pytest.raises(SystemExit) as exited:
+        run_command('nav-x', body)
+    assert exited.value.code == 130 and capsys.readouterr().err == 'nav-x: interrupted\n'
 
 
 class LosingClient:
