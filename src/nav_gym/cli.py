@@ -88,12 +88,12 @@ def run_command(name: str, body: Callable[[], int]) -> None:
         print(f'{name}: error: {exc}', file=sys.stderr)
         code = 1
     except Exception as exc:  # noqa: BLE001 - the last line of defence: one line, not a trace
+        if debug:
+            traceback.print_exc()
         if is_interrupt(exc):  # a Ctrl-C that a C extension reported as another error
             print(f'{name}: interrupted', file=sys.stderr)
             code = 130
         else:
-            if debug:
-                traceback.print_exc()
             print(f'{name}: error: unexpected {describe_exception(exc)} (a bug: please report '
                   f'it with the traceback that {DEBUG_ENV}=1 shows)', file=sys.stderr)
             code = 1

@@ -60,18 +60,13 @@ def describe_exception(exc: BaseException) -> str:
 
 
 def is_interrupt(exc: BaseException) -> bool:
-    """Whether ``exc`` is a Ctrl-C: a KeyboardInterrupt, or an error whose cause or context is one.
+    """Whether ``exc`` is a Ctrl-C: a KeyboardInterrupt, or the SystemError that carries one.
 
     A KeyboardInterrupt that Python's signal handler raises while a C extension's call runs Python
     code (rclpy's ``take_response`` building a service response in an executor's spin) can leave
     the call with a result and the exception set; CPython then raises ``SystemError: <...>
-    returned a result with an exception set`` with the interrupt as its cause.
+    returned a result with an exception set`` with the interrupt as its cause.  Only that shape:
+    an error raised while a Ctrl-C unwinds (its context) is still an error.
     """
-    seen: set[int] = set()
-    current: BaseException | None = exc
-    while current is not None and id(current) not in seen:
-        if isinstance(current, KeyboardInterrupt):
-            return True
-        seen.add(id(current))
-        current = current.__cause__ or current.__context__
-    return False
+    return isinstance(exc, KeyboardInterrupt) or (
+        isinstance(exc, SystemError) and isinstance(exc.__cause__, KeyboardInterrupt))

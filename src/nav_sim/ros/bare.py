@@ -17,10 +17,13 @@ from collections.abc import Sequence
 from typing import Any
 
 import rclpy
+from rclpy.executors import Executor
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from rclpy.subscription import Subscription
+
+from nav_sim.errors import is_interrupt
 
 #: how pybind11 reports an exception raised while it converted a call's arguments
 PYBIND11_CONVERSION_ERROR = 'Unable to convert call argument'
@@ -61,15 +64,38 @@ def wait_ready(wait_set: Any, subscriptions: Sequence[Subscription],
 def take(sub: Subscription) -> Any:
     """Take one message from a ready subscription (rclpy's ``take_message``); None if none.
 
-    A Ctrl-C (or a SIGTERM turned into KeyboardInterrupt) whose Python handler runs while
-    pybind11 converts the call's arguments surfaces as ``RuntimeError: Unable to convert call
-    argument ...`` instead of the KeyboardInterrupt: raise that, so that an interrupted run
-    saves its checkpoint instead of failing.
+    A Ctrl-C that pybind11 reports as another error raises KeyboardInterrupt
+    (:func:`raise_interrupt`), so that an interrupted run saves its checkpoint instead of failing.
     """
     try:
         taken = sub.handle.take_message(sub.msg_type, sub.raw)
-    except RuntimeError as exc:
-        if str(exc).startswith(PYBIND11_CONVERSION_ERROR):
-            raise KeyboardInterrupt from exc
+    except (RuntimeError, SystemError) as exc:
+        raise_interrupt(exc)
         raise
     return None if taken is None else taken[0]
+
+
+def spin_once(executor: Executor, timeout_s: float) -> None:
+    """Run ``executor.spin_once``; a Ctrl-C reported as another error raises KeyboardInterrupt.
+
+    The executor takes service responses and messages through the same pybind11 calls as
+    :func:`take`.
+    """
+    try:
+        executor.spin_once(timeout_sec=timeout_s)
+    except (RuntimeError, SystemError) as exc:
+        raise_interrupt(exc)
+        raise
+
+
+def raise_interrupt(exc: Exception) -> None:
+    """Raise KeyboardInterrupt if ``exc`` is a Ctrl-C that an rclpy call reported as an error.
+
+    A Ctrl-C (or a SIGTERM turned into KeyboardInterrupt) whose Python handler runs while
+    pybind11 converts a call's arguments surfaces as ``RuntimeError: Unable to convert call
+    argument ...``; one whose handler runs while the call builds its result, as the SystemError
+    of :func:`nav_sim.errors.is_interrupt`.
+    """
+    if is_interrupt(exc) or (isinstance(exc, RuntimeError)
+                             and str(exc).startswith(PYBIND11_CONVERSION_ERROR)):
+        raise KeyboardInterrupt from exc

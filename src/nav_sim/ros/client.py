@@ -27,7 +27,7 @@ from nav_sim.core.events import EVENT_NONE
 from nav_sim.errors import FrameSyncError, ScenarioError, SimConflictError, SimUnavailableError
 from nav_sim.ros import messages as ros_msgs
 from nav_sim.ros import qos, sim_graph
-from nav_sim.ros.bare import own_node, subscription_wait_set, take, wait_ready
+from nav_sim.ros.bare import own_node, spin_once, subscription_wait_set, take, wait_ready
 from nav_sim.ros.claim import Claim
 
 POLL_S = 0.25
@@ -132,7 +132,7 @@ class SimClient:
         deadline = time.monotonic() + timeout
         names = self.sim_nodes()
         while not names and time.monotonic() < deadline:
-            self._executor.spin_once(timeout_sec=min(0.05, max(deadline - time.monotonic(), 0)))
+            self.spin_once(min(0.05, max(deadline - time.monotonic(), 0)))
             names = self.sim_nodes()
         return names
 
@@ -152,7 +152,7 @@ class SimClient:
         deadline = time.monotonic() + NAMES_WAIT_S  # a node's name comes after its endpoints
         while (any(sim_graph.UNKNOWN_NODE in name for name in names)
                and time.monotonic() < deadline):
-            self._executor.spin_once(timeout_sec=0.05)
+            self.spin_once(0.05)
             names = self.sim_nodes()
         if max(sim_graph.sim_count(self.node), len(names)) <= 1:
             return  # an unnamed endpoint was the one sim's own
@@ -166,7 +166,7 @@ class SimClient:
             now = time.monotonic()
             if now >= deadline:
                 return False
-            self._executor.spin_once(timeout_sec=min(deadline - now, POLL_S))
+            self.spin_once(min(deadline - now, POLL_S))
             if time.monotonic() >= next_check:
                 if not self.sim_present():
                     raise SimUnavailableError(
@@ -176,8 +176,12 @@ class SimClient:
         return True
 
     def spin_once(self, timeout: float = 0.0) -> None:
-        """Process at most one callback of the client's node, waiting up to ``timeout`` s."""
-        self._executor.spin_once(timeout_sec=timeout)
+        """Process at most one callback of the client's node, waiting up to ``timeout`` s.
+
+        A Ctrl-C raises KeyboardInterrupt, also where rclpy reports it as another error
+        (:func:`nav_sim.ros.bare.spin_once`).
+        """
+        spin_once(self._executor, timeout)
 
     def _take_observations(self, timeout: float) -> None:
         """Wait up to ``timeout`` s on the observation subscriptions and take what arrived."""
@@ -267,10 +271,9 @@ class SimClient:
                 raise SimUnavailableError(
                     f'no nav_sim node found in {self.where} after {limit} s; start one with '
                     '`ros2 run nav_sim sim_node` (add `--ros-args -r __ns:=/NS` for a namespace)')
-            self._executor.spin_once(timeout_sec=0.05)
+            self.spin_once(0.05)
         self.check_single_sim(by_name=True)
-        self.claim.acquire(lambda t: self._executor.spin_once(timeout_sec=t), self.where,
-                           limit, abort)
+        self.claim.acquire(self.spin_once, self.where, limit, abort)
 
     def set_parameters(self, **values: Any) -> None:
         """Set sim_node parameters (e.g. seed, split); raises ScenarioError if refused."""

@@ -234,3 +234,17 @@ def test_an_unexpected_error_is_one_line_and_the_traceback_is_there_on_request(
     with pytest.raises(SystemExit):
         run_command('nav-x', broken)
     assert 'Traceback (most recent call last)' in capsys.readouterr().err
+
+
+def test_a_ctrl_c_reported_as_another_error_exits_130(capsys):
+    # a Ctrl-C that a C extension's call reported as SystemError (its cause the interrupt), as
+    # rclpy's take_response did (2026-11-29): interrupted, not an unexpected error
+    def body() -> int:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise SystemError('<built-in method take_response> returned a result with an '
+                              'exception set') from exc
+    with pytest.raises(SystemExit) as exited:
+        run_command('nav-x', body)
+    assert exited.value.code == 130 and capsys.readouterr().err == 'nav-x: interrupted\n'
