@@ -70,6 +70,22 @@ def interrupt(process: subprocess.Popen, timeout: float = 15.0) -> tuple[int, st
     return process.returncode, (out or '') + (err or '')
 
 
+def reported_as_another_error() -> SystemError:
+    """Return the error CPython raises when a C call returns a result with a Ctrl-C set.
+
+    As ``_Py_CheckFunctionResult`` does: a SystemError with the interrupt as its cause (rclpy's
+    ``take_response`` hit by a Ctrl-C, 2026-11-29).
+    """
+    try:
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as exc:
+            raise SystemError('<built-in method take_response of PyCapsule object> returned a '
+                              'result with an exception set') from exc
+    except SystemError as error:
+        return error
+
+
 def learner_env(spaces_only: type, learner):  # noqa: ANN001, ANN201
     """Return an env with only the spaces for ``learner``: in the agent's stacks with memory."""
     if not learner.memory:

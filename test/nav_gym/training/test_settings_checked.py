@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from helpers import reported_as_another_error
 from nav_eval import sweep
 from nav_gym import train
 from nav_gym.cli import run_command
@@ -240,11 +241,7 @@ def test_a_ctrl_c_reported_as_another_error_exits_130(capsys):
     # a Ctrl-C that a C extension's call reported as SystemError (its cause the interrupt), as
     # rclpy's take_response did (2026-11-29): interrupted, not an unexpected error
     def body() -> int:
-        try:
-            raise KeyboardInterrupt
-        except KeyboardInterrupt as exc:
-            raise SystemError('<built-in method take_response> returned a result with an '
-                              'exception set') from exc
+        raise reported_as_another_error()
     with pytest.raises(SystemExit) as exited:
         run_command('nav-x', body)
     assert exited.value.code == 130 and capsys.readouterr().err == 'nav-x: interrupted\n'

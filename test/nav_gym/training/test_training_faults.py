@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from helpers import wait_until
+from helpers import reported_as_another_error, wait_until
 from nav_gym.errors import DiskFullError
 from nav_gym.training import trainer as train
 from nav_gym.training.run_dir import checkpoints
@@ -217,11 +217,7 @@ def test_a_ctrl_c_reported_as_another_error_saves_a_checkpoint_as_ctrl_c_does(
     class ReportedAsAnotherError(BaseCallback):
         def _on_step(self) -> bool:
             if self.num_timesteps == 30:
-                try:
-                    raise KeyboardInterrupt
-                except KeyboardInterrupt as exc:
-                    raise SystemError('<built-in method take_response> returned a result '
-                                      'with an exception set') from exc
+                raise reported_as_another_error()
             return True
 
     monkeypatch.setattr(train, 'training_callback', lambda env: ReportedAsAnotherError())

@@ -17,7 +17,7 @@ from pathlib import Path
 import pytest
 from rclpy.parameter_client import AsyncParameterClient
 
-from helpers import interrupt
+from helpers import interrupt, reported_as_another_error
 from nav_sim.errors import ScenarioError, SimUnavailableError, is_interrupt
 from nav_sim.ros.client import SimClient
 from nav_sim.ros.process import SimProcess, executable_command, ros_args
@@ -261,18 +261,6 @@ def test_ctrl_c_during_a_take_is_an_interrupt_not_a_runtime_error():
     with pytest.raises(RuntimeError, match='something else'):
         take(SimpleNamespace(handle=SimpleNamespace(take_message=broken), msg_type=object,
                               raw=False))
-
-
-def reported_as_another_error() -> SystemError:
-    """Return the error CPython raises when a C call returns a result with a Ctrl-C set."""
-    try:
-        try:
-            raise KeyboardInterrupt
-        except KeyboardInterrupt as exc:  # as _Py_CheckFunctionResult: the interrupt its cause
-            raise SystemError('<built-in method take_response of PyCapsule object> returned a '
-                              'result with an exception set') from exc
-    except SystemError as error:
-        return error
 
 
 def failing_cleanup() -> None:
