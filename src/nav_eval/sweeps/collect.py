@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from nav_eval.analysis import anatomy, calibration
+from nav_eval.analysis import anatomy, calibration, looks
 from nav_eval.errors import SweepError
 from nav_eval.seeds import HELDOUT_BANK, TRAIN_BANK, seed_text
 from nav_eval.sweeps.spec import (
@@ -87,7 +87,8 @@ def read_exported(summaries: list[Path]) -> list[dict[str, Any]]:
 
     A summary keeps each trial's final rates and its curve's success rates, not its episodes:
     such a trial (``exported``) counts in the aggregates, the probability of improvement and the
-    curve, and has no anatomy, calibration or pooled bank row.  Its settings are read as an
+    curve, and the held-out outcomes by look where its summary kept them, and it has no
+    anatomy, calibration or pooled bank row.  Its settings are read as an
     older run's config is (:func:`_summary_settings`).  Its name is ``<summary>:<trial>``.  A
     trial that two summaries hold (a comparison's summary beside the sweep's own) counts once:
     the first read, with the curve of a later copy where the first kept none.
@@ -112,6 +113,7 @@ def read_exported(summaries: list[Path]) -> list[dict[str, Any]]:
             seen[key] = {'name': f"{summary.name}:{row['trial']}", 'run_dir': summary,
                          'seed': row['seed'], 'settings': settings,
                          'final': final, 'curve': _summary_curve(row), 'anatomy': [],
+                         'looks': row.get('looks', {}),
                          'values': [], 'curve_values': {}, 'finished': True, 'exported': True,
                          'wall_clock_s': row.get('wall_clock_s'), 'steps': row.get('steps')}
             trials.append(seen[key])
@@ -198,6 +200,7 @@ def read_trial(run_dir: Path) -> dict[str, Any]:
             'final': final, 'curve': curve,
             'anatomy': anatomy.traces_anatomy(traces, results.get('arena'), half_fov(config)),
             'values': calibration.traces_values(traces, config),
+            'looks': looks.count_outcomes(traces),
             'curve_values': curve_values,
             'finished': (run_dir / FINAL_MODEL).is_file(), 'exported': False,
             'wall_clock_s': summary.get('wall_clock_total_s'),

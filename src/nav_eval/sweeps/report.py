@@ -4,7 +4,8 @@ Reads only files (no ROS, no Ray): each trial is a run directory as ``nav-gym-tr
 with its ``eval/results.json`` (final model on the training and held-out seeds) and
 ``eval/curve/<steps>/results.json`` (held-out success per checkpoint) and, where they were
 kept, the episodes' traces (the failure anatomy, :mod:`nav_eval.analysis.anatomy`, and the value
-calibration, :mod:`nav_eval.analysis.calibration`); baselines are
+calibration, :mod:`nav_eval.analysis.calibration`; with drawn looks, the outcomes by look,
+:mod:`nav_eval.analysis.looks`); baselines are
 ``baselines/<config>.json``.  Trials with the same training settings (all but the seed and
 bookkeeping such as the run name) form one configuration.  The same trials aggregated twice give
 identical files (fixed bootstrap seed, PNGs without a software/date stamp).
@@ -35,10 +36,11 @@ FIGURES = (('intervals', 'Interval estimates per configuration: success'),
            ('profile', 'Performance profile of held-out success'),
            ('curve', 'Sample efficiency'), ('improvement', 'Probability of improvement'))
 ANATOMY = 'Failure anatomy (held-out)'
+LOOKS = 'Outcomes by look (held-out)'
 CALIBRATION = 'Value calibration (held-out)'
 #: every section heading of Sweep.md (probability of improvement only with > 1 configuration)
 SECTIONS = ('Configurations: held-out success and collisions', *(c for _, c in FIGURES),
-            'Per seed', ANATOMY, CALIBRATION, 'Bank difficulty')
+            'Per seed', ANATOMY, LOOKS, CALIBRATION, 'Bank difficulty')
 
 
 def _ci(estimate: dict[str, float] | None, digits: int = 0) -> str:
@@ -57,6 +59,7 @@ def _markdown(folder: Path, data: dict[str, Any], figures: dict[str, str]) -> st
     lines += _configurations_markdown(data, figures)
     lines += _per_seed_markdown(data['per_seed'])
     lines += _anatomy_markdown(data['anatomy'])
+    lines += _looks_markdown(data['looks'])
     lines += _calibration_markdown(data['calibration'])
     lines += _banks_markdown(data)
     if data['failed']:
@@ -156,6 +159,26 @@ def _anatomy_markdown(rows: list[dict[str, Any]]) -> list[str]:
     lines += table(['Configuration', 'Seed', 'Outcome', 'Episodes', 'Decisions before in view '
                     '(median)', 'Never in view', 'Goal in view', 'Forward when in view',
                     'Reversals / 100', 'Hits out of view'], body)
+    return lines
+
+
+def _looks_markdown(rows: list[dict[str, Any]]) -> list[str]:
+    lines = [f'## {LOOKS}', '']
+    if not rows:
+        return lines + ['No held-out trace carried a drawn look (the sim parameter '
+                        '`randomize_look`).', '']
+    lines += ["The held-out episodes' outcomes by a factor of their scenario's drawn look, the "
+              "configuration's seeds pooled (a comparison's summaries included, where they kept "
+              "them): the obstacles' hue band (held-out looks draw from the odd bands, training "
+              "looks from the even ones) and their luminance (Rec. 709 weights on the material "
+              'colour; `nav_eval.analysis.looks`). A factor that fails in one bin and not the '
+              'others points to what the policy has not learnt to see; the bins are few '
+              "scenarios each, so read them as a hypothesis for a sweep, not as a result.", '']
+    body = [[r['config'], r['seed'], r['factor'], r['bin'], r['episodes'],
+             pct(r['success_rate']), pct(r['collision_rate']), pct(r['timeout_rate'])]
+            for r in rows]
+    lines += table(['Configuration', 'Seeds', 'Factor', 'Bin', 'Episodes', 'Success',
+                    'Collisions', 'Time-outs'], body)
     return lines
 
 

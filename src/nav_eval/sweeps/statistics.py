@@ -1,4 +1,4 @@
-"""A sweep's statistics: per-seed rows, rliable aggregates, curves, banks, anatomy, calibration."""
+"""A sweep's statistics: per-seed rows, aggregates, curves, banks, anatomy, calibration, looks."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from nav_eval.analysis import anatomy, calibration, stats
+from nav_eval.analysis import anatomy, calibration, looks, stats
 from nav_eval.errors import SweepError
 from nav_eval.sweeps.collect import (
     FINAL_SETS,
@@ -49,6 +49,8 @@ def per_seed_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
             if len(scenarios) == 1:  # a summary keeps the trial's curve: comparisons pool it
                 row['curve'] = {str(s): p['success_rate'] for s, p in t['curve'].items()}
                 row['curve_seeds'] = list(scenarios.pop())
+            if t.get('looks'):  # counts, so that a comparison of summaries pools them
+                row['looks'] = t['looks']
             rows.append(row)
     return rows
 
@@ -67,6 +69,23 @@ def anatomy_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
             for outcome, figures in anatomy.summarise(episodes).items():
                 rows.append({'config': config, 'seed': seed, 'outcome': outcome, **figures})
     return rows
+
+
+def look_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
+    """Return the held-out outcomes by look per configuration, its trials with looks pooled.
+
+    A row's ``seed`` is 'all' when every trial of the configuration drew looks, else the seeds
+    that did; a configuration without drawn looks has no rows.
+    """
+    out = []
+    for config, members in groups.items():
+        found = [t for t in members if t.get('looks')]
+        if not found:
+            continue
+        label = 'all' if len(found) == len(members) else ', '.join(str(t['seed']) for t in found)
+        for row in looks.rows(looks.add(t['looks'] for t in found)):
+            out.append({'config': config, 'seed': label, **row})
+    return out
 
 
 def calibration_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
@@ -200,7 +219,8 @@ def summarise(folder: Path) -> tuple[dict[str, Any], dict[str, Any], dict[str, A
         'bank_verdict': stats.bank_verdict([r for r in banks]), 'missing': missing,
         'failed': read_json(folder / FAILED_FILE) or {},
         'settings': {c: m[0]['settings'] for c, m in groups.items()},
-        'anatomy': anatomy_rows(groups), 'calibration': calibration_rows(groups)}
+        'anatomy': anatomy_rows(groups), 'calibration': calibration_rows(groups),
+        'looks': look_rows(groups)}
     data['oracle_gap'] = oracle_gaps(banks, data['aggregates'])
     success = {c: stats.score_matrix([t['final'][HELDOUT]['summary']['success_rate']
                                       for t in m if HELDOUT in t['final']])
