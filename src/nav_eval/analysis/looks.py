@@ -1,4 +1,4 @@
-"""How a set's outcomes vary with its scenarios' drawn looks (pure: no ROS, no numpy).
+"""How a set's outcomes vary with its scenarios' drawn looks (pure: no ROS, no torch).
 
 With the sim parameter ``randomize_look`` every scenario draws a look
 (:mod:`nav_sim.core.looks`), and the evaluation's traces keep it (``scenario.look``).  This
@@ -68,15 +68,18 @@ def count_outcomes(traces: Iterable[tuple[Any, dict[str, Any]]]) -> Counts:
 
     ``traces`` are ``(path, trace)`` pairs, as :func:`nav_gym.training.run_dir.read_traces`
     yields them.  An episode without a drawn look (the plain look, or a trace from before looks)
-    counts nowhere, so a set without looks gives ``{}``.
+    or with one that lacks the obstacles' colour counts nowhere, so a set without looks gives
+    ``{}``.
     """
     counts: Counts = {}
     for _, trace in traces:
         look = (trace.get('scenario') or {}).get('look')
-        if not look:
+        try:
+            bins = look_bins(look) if look else {}
+        except (KeyError, TypeError, ValueError):  # a look this cannot read: counts nowhere
             continue
         outcome = trace.get('outcome')
-        for factor, label in look_bins(look).items():
+        for factor, label in bins.items():
             row = counts.setdefault(factor, {}).setdefault(label, [0] * (1 + len(OUTCOMES)))
             row[0] += 1
             if outcome in OUTCOMES:

@@ -54,6 +54,9 @@ def test_outcomes_are_counted_per_bin_and_episodes_without_a_look_nowhere():
     assert counts[looks.HUE] == {yellow: [3, 1, 1, 1]}
     assert counts[looks.LUMINANCE] == {'≥ 0.45': [2, 1, 1, 0], '< 0.25': [1, 0, 0, 1]}
     assert looks.count_outcomes([trace(4, 'collision', None)]) == {}
+    unreadable = trace(5, 'collision', hsv(50))
+    del unreadable[1]['scenario']['look']['obstacles']
+    assert looks.count_outcomes([unreadable]) == {}
     rows = looks.rows(looks.add([counts, counts]))
     assert [(r['factor'], r['bin'], r['episodes']) for r in rows] == [
         (looks.HUE, yellow, 6), (looks.LUMINANCE, '< 0.25', 2), (looks.LUMINANCE, '≥ 0.45', 4)]
