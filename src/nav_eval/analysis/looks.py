@@ -37,10 +37,8 @@ def luminance(rgb: Iterable[float]) -> float:
     return sum(w * float(c) for w, c in zip(REC709, rgb, strict=True))
 
 
-def band_label(band: int | None) -> str:
+def band_label(band: int) -> str:
     """Return a hue band's label: its number and its hues in degrees (``band 11 (40-60°)``)."""
-    if band is None:
-        return 'grey'
     width = HUE_SPAN / BANDS
     low = (HUE_START + band * width) % 360.0
     return f'band {band:02d} ({low:.0f}–{low + width:.0f}°)'
@@ -60,7 +58,10 @@ def luminance_label(value: float) -> str:
 def look_bins(look: Mapping[str, Any]) -> dict[str, str]:
     """Return, per factor, the bin of one scenario's look (a trace's ``scenario.look``)."""
     obstacles = tuple(float(c) for c in look['obstacles'])
-    return {HUE: band_label(hue_band(obstacles)), LUMINANCE: luminance_label(luminance(obstacles))}
+    band = hue_band(obstacles)
+    hue = band_label(band) if band is not None else \
+        'grey' if max(obstacles) == min(obstacles) else 'outside the drawn hues'
+    return {HUE: hue, LUMINANCE: luminance_label(luminance(obstacles))}
 
 
 def count_outcomes(traces: Iterable[tuple[Any, dict[str, Any]]]) -> Counts:

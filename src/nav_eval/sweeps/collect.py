@@ -91,7 +91,8 @@ def read_exported(summaries: list[Path]) -> list[dict[str, Any]]:
     anatomy, calibration or pooled bank row.  Its settings are read as an
     older run's config is (:func:`_summary_settings`).  Its name is ``<summary>:<trial>``.  A
     trial that two summaries hold (a comparison's summary beside the sweep's own) counts once:
-    the first read, with the curve of a later copy where the first kept none.
+    the first read, with the curve and the counts by look of a later copy where the first kept
+    none.
     """
     trials, seen = [], {}
     for summary in summaries:
@@ -106,6 +107,7 @@ def read_exported(summaries: list[Path]) -> list[dict[str, Any]]:
                               [f'{v:.4g}' if isinstance(v, float) else v for v in figures]])
             if key in seen:
                 seen[key]['curve'] = seen[key]['curve'] or _summary_curve(row)
+                seen[key]['looks'] = seen[key]['looks'] or row.get('looks', {})
                 continue
             final = {split: {'summary': {**{rate: row[f'{split}_{rate}'] for rate in RATES},
                                          'episodes': row[f'{split}_episodes']}}

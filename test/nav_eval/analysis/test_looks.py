@@ -31,6 +31,7 @@ def test_a_look_falls_in_its_hue_band_and_luminance_bin():
     assert bins[looks.LUMINANCE] == '≥ 0.45'
     assert looks.look_bins({'obstacles': hsv(190.0)})[looks.HUE] == 'band 00 (180–200°)'
     assert looks.look_bins({'obstacles': [0.3, 0.3, 0.3]})[looks.HUE] == 'grey'
+    assert looks.look_bins({'obstacles': hsv(120.0)})[looks.HUE] == 'outside the drawn hues'
     assert looks.luminance([1.0, 1.0, 1.0]) == pytest.approx(1.0)
     edges = looks.LUMINANCE_EDGES
     assert [looks.luminance_label(v) for v in (0.0, edges[0], edges[1] - 1e-9, edges[2], 1.0)] \
@@ -53,6 +54,13 @@ def test_outcomes_are_counted_per_bin_and_episodes_without_a_look_nowhere():
     yellow = looks.band_label(11)
     assert counts[looks.HUE] == {yellow: [3, 1, 1, 1]}
     assert counts[looks.LUMINANCE] == {'≥ 0.45': [2, 1, 1, 0], '< 0.25': [1, 0, 0, 1]}
+    # bands by number (9 before 11), luminance from dark to bright
+    mixed = looks.count_outcomes([trace(1, 'success', hsv(50)), trace(2, 'success', hsv(10)),
+                                  trace(3, 'success', hsv(230, value=0.5))])
+    assert [(r['factor'], r['bin']) for r in looks.rows(mixed)] == [
+        (looks.HUE, 'band 02 (220–240°)'), (looks.HUE, 'band 09 (0–20°)'),
+        (looks.HUE, yellow), (looks.LUMINANCE, '< 0.25'), (looks.LUMINANCE, '0.35–0.45'),
+        (looks.LUMINANCE, '≥ 0.45')]
     assert looks.count_outcomes([trace(4, 'collision', None)]) == {}
     unreadable = trace(5, 'collision', hsv(50))
     del unreadable[1]['scenario']['look']['obstacles']
@@ -76,6 +84,12 @@ def test_a_comparison_pools_a_runs_counts_with_those_its_summary_kept(tmp_path):
         {'per_seed': per_seed_rows({'c': [trial]}), 'settings': {}}, sort_keys=True))
     exported = read_exported([summary])
     assert exported[0]['looks'] == counts  # through JSON, as a comparison reads it
+    # a comparison's copy of the trial that kept no counts, read first: the later copy's count
+    bare = tmp_path / 'a-bare'
+    bare.mkdir()
+    (bare / 'results.json').write_text(json.dumps(
+        {'per_seed': per_seed_rows({'c': [{**trial, 'looks': {}}]}), 'settings': {}}))
+    assert [t['looks'] for t in read_exported([bare, summary])] == [counts]
     run = {**trial, 'seed': 2, 'name': 'seed2'}
     plain = {**trial, 'seed': 3, 'name': 'seed3', 'looks': {}}  # trained and evaluated plain
     rows = look_rows({'c': [*exported, run, plain]})
