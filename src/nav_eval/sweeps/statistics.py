@@ -55,6 +55,13 @@ def per_seed_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
     return rows
 
 
+def pool_label(seeds: list[Any], members: list[dict]) -> Any:
+    """Name a pool of a configuration's trials: 'all' if every member is in it, else its seeds."""
+    if len(seeds) == len(members):
+        return 'all'
+    return seeds[0] if len(seeds) == 1 else ', '.join(map(str, seeds))
+
+
 def anatomy_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
     """Return the held-out failure anatomy per configuration and seed, then pooled ('all')."""
     rows = []
@@ -63,8 +70,7 @@ def anatomy_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
         if not pooled:
             continue
         pools = [(t['seed'], t['anatomy']) for t in members if t['anatomy']]
-        # 'all' when every trial is in the pool (a summary's trials keep no anatomy)
-        label = 'all' if len(pools) == len(members) else ', '.join(str(s) for s, _ in pools)
+        label = pool_label([s for s, _ in pools], members)  # a summary's trials keep none
         for seed, episodes in pools + ([(label, pooled)] if len(pools) > 1 else []):
             for outcome, figures in anatomy.summarise(episodes).items():
                 rows.append({'config': config, 'seed': seed, 'outcome': outcome, **figures})
@@ -82,7 +88,7 @@ def look_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
         found = [t for t in members if t.get('looks')]
         if not found:
             continue
-        label = 'all' if len(found) == len(members) else ', '.join(str(t['seed']) for t in found)
+        label = pool_label([t['seed'] for t in found], members)
         for row in looks.rows(looks.add(t['looks'] for t in found)):
             out.append({'config': config, 'seed': label, **row})
     return out
@@ -97,10 +103,8 @@ def calibration_rows(groups: dict[str, list[dict]]) -> list[dict[str, Any]]:
     it, else the seed or seeds that are.
     """
     def pool(found: list[tuple[int, list]], members: list[dict]) -> tuple[Any, list]:
-        seeds = [seed for seed, _ in found]
-        label = 'all' if len(seeds) == len(members) else \
-            seeds[0] if len(seeds) == 1 else ', '.join(map(str, seeds))
-        return label, [e for _, episodes in found for e in episodes]
+        return (pool_label([seed for seed, _ in found], members),
+                [e for _, episodes in found for e in episodes])
 
     rows = []
     for config, members in groups.items():
